@@ -1,0 +1,141 @@
+"""The daemon's configuration: one TOML file, loaded strictly (SPEC §11).
+
+``config/placecell.toml`` is the documented default. Unknown keys, wrong types and
+out-of-range values raise :class:`ConfigError` naming ``section.key`` before any device
+is opened.
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+from daemon.errors import ConfigError
+from daemon.settings import as_dict, build, setting
+from daemon.vision.settings import MirrorSettings, PanoramaSettings
+from hal.base.settings import BaseSettings
+from hal.camera.settings import CameraSettings
+from hal.registry import BASE_BACKENDS, CAMERA_BACKENDS
+from hal.sim.settings import SimSettings
+
+_ROBOT_NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+
+
+@dataclass(frozen=True)
+class RobotSettings:
+    name: str = setting("sim1", doc="robot name, the zenoh key prefix placecell/<name>/")
+
+    def __post_init__(self) -> None:
+        if not _ROBOT_NAME.match(self.name):
+            raise ValueError(
+                f"robot.name {self.name!r} must be 1-64 letters, digits, '-' or '_' "
+                "(it is a zenoh key segment)"
+            )
+
+
+@dataclass(frozen=True)
+class ZenohSettings:
+    mode: Literal["peer", "client"] = setting("peer")
+    listen: list[str] = setting(["tcp/127.0.0.1:7447"], doc="endpoints to listen on")
+    connect: list[str] = setting([], doc="endpoints to connect to")
+    multicast_scouting: bool = setting(False, doc="off: nothing leaves the machine unasked")
+
+
+@dataclass(frozen=True)
+class MapSettings:
+    path: str = setting("var/placecell.db", doc="SQLite map file")
+
+
+@dataclass(frozen=True)
+class ServiceSettings:
+    status_period_s: float = setting(1.0, gt=0.0, le=60.0)
+    restart_backoff_initial_s: float = setting(0.2, gt=0.0, le=60.0)
+    restart_backoff_max_s: float = setting(5.0, gt=0.0, le=600.0)
+    stop_timeout_s: float = setting(1.5, gt=0.0, le=30.0, doc="grace period on SIGTERM")
+    stale_after_s: float = setting(1.0, gt=0.0, le=60.0, doc="a device silent this long is faulty")
+
+
+@dataclass(frozen=True)
+class LogSettings:
+    level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = setting("INFO")
+
+
+@dataclass(frozen=True)
+class PlacecellConfig:
+    robot: RobotSettings = setting(default_factory=RobotSettings)
+    camera: CameraSettings = setting(default_factory=CameraSettings)
+    base: BaseSettings = setting(default_factory=BaseSettings)
+    mirror: MirrorSettings = setting(default_factory=MirrorSettings)
+    panorama: PanoramaSettings = setting(default_factory=PanoramaSettings)
+    sim: SimSettings = setting(default_factory=SimSettings)
+    zenoh: ZenohSettings = setting(default_factory=ZenohSettings)
+    map: MapSettings = setting(default_factory=MapSettings)
+    service: ServiceSettings = setting(default_factory=ServiceSettings)
+    log: LogSettings = setting(default_factory=LogSettings)
+
+    def __post_init__(self) -> None:
+        if self.camera.backend not in CAMERA_BACKENDS:
+            raise ValueError(
+                f"camera.backend {self.camera.backend!r} is not one of "
+                f"{', '.join(sorted(CAMERA_BACKENDS))}"
+            )
+        if self.base.backend not in BASE_BACKENDS:
+            raise ValueError(
+                f"base.backend {self.base.backend!r} is not one of "
+                f"{', '.join(sorted(BASE_BACKENDS))}"
+            )
+
+
+def from_dict(data: dict[str, Any]) -> PlacecellConfig:
+    """Validate a parsed TOML document."""
+    return build(PlacecellConfig, data, "config")
+
+
+def load(path: str | Path | None) -> PlacecellConfig:
+    """Load and validate ``path``; ``None`` gives the built-in defaults."""
+    if path is None:
+        return from_dict({})
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as e:
+        raise ConfigError(f"cannot read configuration {p}: {e.strerror}") from e
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{p}: not valid TOML: {e}") from e
+    try:
+        return from_dict(data)
+    except ConfigError as e:
+        raise ConfigError(f"{p}: {e}") from e
+
+
+def to_toml(config: PlacecellConfig) -> str:
+    """The effective configuration as TOML text (``placecelld --print-config``)."""
+    lines: list[str] = []
+
+    def emit(table: dict[str, Any], prefix: str) -> None:
+        scalars = {k: v for k, v in table.items() if not isinstance(v, dict)}
+        tables = {k: v for k, v in table.items() if isinstance(v, dict)}
+        if prefix and scalars:
+            lines.append(f"\n[{prefix}]")
+        for k, v in scalars.items():
+            lines.append(f"{k} = {_toml_value(v)}")
+        for k, v in tables.items():
+            emit(v, f"{prefix}.{k}" if prefix else k)
+
+    emit(as_dict(config), "")
+    return "\n".join(lines).lstrip("\n") + "\n"
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    return repr(v)

@@ -1,0 +1,159 @@
+"""Strict settings: frozen dataclasses built from TOML tables.
+
+Every settings class in the project (the daemon's sections and each backend's section,
+STYLE.md rule 2) is a frozen dataclass whose fields are declared with :func:`setting`.
+:func:`build` turns a TOML table into one, rejecting unknown keys, wrong types and
+out-of-range values with a :class:`ConfigError` naming ``section.key``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from collections.abc import Mapping
+from typing import Any, Literal, TypeVar, get_args, get_origin
+
+from daemon.errors import ConfigError
+
+T = TypeVar("T")
+
+_MISSING = dataclasses.MISSING
+
+
+def setting(
+    default: Any = _MISSING,
+    *,
+    ge: float | None = None,
+    gt: float | None = None,
+    le: float | None = None,
+    lt: float | None = None,
+    doc: str = "",
+    default_factory: Any = _MISSING,
+) -> Any:
+    """A dataclass field with an optional numeric range and a one-line description."""
+    meta = {"ge": ge, "gt": gt, "le": le, "lt": lt, "doc": doc}
+    if default_factory is not _MISSING:
+        return dataclasses.field(default_factory=default_factory, metadata=meta)
+    if isinstance(default, list | dict):
+        value = default
+        return dataclasses.field(default_factory=lambda: type(value)(value), metadata=meta)
+    return dataclasses.field(default=default, metadata=meta)
+
+
+def build(cls: type[T], table: Mapping[str, Any] | None, section: str) -> T:
+    """Build settings class ``cls`` from ``table``; ``section`` names it in errors."""
+    table = {} if table is None else table
+    if not isinstance(table, Mapping):
+        raise ConfigError(f"[{section}] must be a table, got {type(table).__name__}")
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    unknown = sorted(set(table) - set(fields))
+    if unknown:
+        known = ", ".join(sorted(fields))
+        raise ConfigError(
+            f"[{section}] unknown key {unknown[0]!r} (known keys: {known})"
+        )
+    values: dict[str, Any] = {}
+    for name, field in fields.items():
+        where = f"{section}.{name}"
+        if name not in table:
+            if field.default is _MISSING and field.default_factory is _MISSING:
+                raise ConfigError(f"[{section}] missing required key {name!r}")
+            continue
+        value = _convert(hints[name], table[name], where)
+        _check_range(field.metadata, value, where)
+        values[name] = value
+    try:
+        obj = cls(**values)
+    except (ValueError, TypeError) as e:  # __post_init__ cross-field checks
+        raise ConfigError(f"[{section}] {e}") from e
+    return obj
+
+
+def as_dict(obj: Any) -> Any:
+    """Settings back to plain TOML-able data (the effective configuration)."""
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return {f.name: as_dict(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    if isinstance(obj, list | tuple):
+        return [as_dict(v) for v in obj]
+    return obj
+
+
+def _type_name(tp: Any) -> str:
+    return getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
+
+
+def _convert(tp: Any, value: Any, where: str) -> Any:
+    origin = get_origin(tp)
+    if dataclasses.is_dataclass(tp):
+        return build(tp, value, where)  # type: ignore[arg-type]
+    if origin is Literal:
+        choices = get_args(tp)
+        if value not in choices:
+            raise ConfigError(
+                f"{where}: {value!r} is not one of {', '.join(repr(c) for c in choices)}"
+            )
+        return value
+    if origin in (typing.Union, types.UnionType):
+        args = get_args(tp)
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for arg in args:
+            if arg is type(None):
+                continue
+            try:
+                return _convert(arg, value, where)
+            except ConfigError as e:
+                errors.append(str(e))
+        raise ConfigError(errors[0] if len(errors) == 1 else f"{where}: {value!r} fits no type")
+    if origin in (list, tuple):
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"{where}: expected a list, got {type(value).__name__} {value!r}")
+        args = get_args(tp)
+        if origin is tuple and args and args[-1] is not Ellipsis:
+            if len(value) != len(args):
+                raise ConfigError(f"{where}: expected {len(args)} values, got {len(value)}")
+            items = [
+                _convert(a, v, f"{where}[{i}]")
+                for i, (a, v) in enumerate(zip(args, value, strict=True))
+            ]
+        else:
+            item_tp = args[0] if args else Any
+            items = [_convert(item_tp, v, f"{where}[{i}]") for i, v in enumerate(value)]
+        return tuple(items) if origin is tuple else items
+    if tp is Any:
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where}: expected true or false, got {value!r}")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{where}: expected an integer, got {type(value).__name__} {value!r}")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"{where}: expected a number, got {type(value).__name__} {value!r}")
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{where}: expected a string, got {type(value).__name__} {value!r}")
+        return value
+    raise ConfigError(f"{where}: unsupported setting type {_type_name(tp)}")
+
+
+def _check_range(meta: Mapping[str, Any], value: Any, where: str) -> None:
+    numbers = value if isinstance(value, list | tuple) else [value]
+    for v in numbers:
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            continue
+        if meta.get("ge") is not None and not v >= meta["ge"]:
+            raise ConfigError(f"{where}: {v!r} is out of range (must be >= {meta['ge']})")
+        if meta.get("gt") is not None and not v > meta["gt"]:
+            raise ConfigError(f"{where}: {v!r} is out of range (must be > {meta['gt']})")
+        if meta.get("le") is not None and not v <= meta["le"]:
+            raise ConfigError(f"{where}: {v!r} is out of range (must be <= {meta['le']})")
+        if meta.get("lt") is not None and not v < meta["lt"]:
+            raise ConfigError(f"{where}: {v!r} is out of range (must be < {meta['lt']})")

@@ -1,0 +1,1 @@
+"""Hardware abstraction layer: devices behind small interfaces; nothing else touches hardware."""

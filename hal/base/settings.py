@@ -1,0 +1,66 @@
+"""Settings of the base section and of each base backend (STYLE.md rule 2)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from daemon.settings import setting
+
+
+@dataclass(frozen=True)
+class SimBaseSettings:
+    odometry_rate_hz: float = setting(50.0, gt=0.0, le=1000.0)
+    max_speed_m_s: float = setting(0.6, gt=0.0, le=3.0)
+    max_accel_m_s2: float = setting(1.0, gt=0.0, le=10.0)
+    max_yaw_rate_rad_s: float = setting(1.5, gt=0.0, le=10.0)
+    max_yaw_accel_rad_s2: float = setting(3.0, gt=0.0, le=50.0)
+    # Drift (SPEC §10): odometry = truth distorted by these.
+    scale_error: float = setting(0.005, ge=-0.2, le=0.2, doc="fractional error of distance")
+    heading_bias_rad_per_m: float = setting(
+        0.006, ge=-0.5, le=0.5, doc="heading error gained per metre travelled"
+    )
+    random_walk_m_per_sqrt_m: float = setting(
+        0.01, ge=0.0, le=1.0, doc="position noise per sqrt(metre) travelled"
+    )
+    random_walk_rad_per_sqrt_m: float = setting(
+        0.003, ge=0.0, le=1.0, doc="heading noise per sqrt(metre) travelled"
+    )
+    can_move: bool = setting(True, doc="whether motion commands are accepted")
+
+
+@dataclass(frozen=True)
+class ReplayBaseSettings:
+    file: str = setting("", doc="MCAP recording; empty: the camera's replay file")
+    speed: float = setting(1.0, ge=0.0, le=1000.0)
+
+
+@dataclass(frozen=True)
+class Xr4000SerialSettings:
+    port: str = setting("/dev/ttyUSB0", doc="serial device of the XR4000 bridge")
+    baud_rate: int = setting(115200, ge=1200, le=4_000_000)
+    command_timeout_s: float = setting(0.5, gt=0.0, le=10.0, doc="wait for ACK/NAK")
+    silence_timeout_s: float = setting(0.5, gt=0.0, le=10.0, doc="no odometry this long = fault")
+
+
+@dataclass(frozen=True)
+class Xr4000CanSettings:
+    interface: str = setting("socketcan", doc="python-can interface: socketcan, slcan, virtual")
+    channel: str = setting("can0", doc="python-can channel (slcan: the serial port)")
+    bitrate: int = setting(500_000, ge=10_000, le=1_000_000)
+    odometry_position_id: int = setting(0x181, ge=0, le=0x7FF)
+    odometry_heading_id: int = setting(0x281, ge=0, le=0x7FF)
+    move_id: int = setting(0x201, ge=0, le=0x7FF)
+    velocity_id: int = setting(0x202, ge=0, le=0x7FF)
+    stop_id: int = setting(0x200, ge=0, le=0x7FF)
+    command_timeout_s: float = setting(0.5, gt=0.0, le=10.0)
+    silence_timeout_s: float = setting(0.5, gt=0.0, le=10.0)
+
+
+@dataclass(frozen=True)
+class BaseSettings:
+    backend: str = setting("sim", doc="sim | replay | xr4000-serial | xr4000-can")
+    read_timeout_s: float = setting(0.5, gt=0.0, le=60.0)
+    sim: SimBaseSettings = setting(default_factory=SimBaseSettings)
+    replay: ReplayBaseSettings = setting(default_factory=ReplayBaseSettings)
+    xr4000_serial: Xr4000SerialSettings = setting(default_factory=Xr4000SerialSettings)
+    xr4000_can: Xr4000CanSettings = setting(default_factory=Xr4000CanSettings)

@@ -1,0 +1,1 @@
+"""Camera backends: sim, replay (MCAP), v4l2, libcamera."""

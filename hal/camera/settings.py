@@ -1,0 +1,53 @@
+"""Settings of the camera section and of each camera backend (STYLE.md rule 2)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+from daemon.settings import setting
+
+
+@dataclass(frozen=True)
+class SimCameraSettings:
+    rate_hz: float = setting(10.0, gt=0.0, le=120.0, doc="frame rate")
+    image_width: int = setting(640, ge=64, le=4096, doc="raw image width")
+    image_height: int = setting(480, ge=64, le=4096, doc="raw image height")
+    noise_sigma: float = setting(2.0, ge=0.0, le=64.0, doc="Gaussian pixel noise, grey levels")
+    blur_sigma_px: float = setting(0.0, ge=0.0, le=10.0, doc="Gaussian blur of the raw image")
+    gain: float = setting(1.0, gt=0.0, le=4.0, doc="illumination gain")
+
+
+@dataclass(frozen=True)
+class V4L2Settings:
+    device: str = setting("/dev/video0", doc="V4L2 device path")
+    pixel_format: str = setting("MJPG", doc="FOURCC, e.g. MJPG or YUYV")
+    width: int = setting(1280, ge=16, le=8192)
+    height: int = setting(960, ge=16, le=8192)
+    rate_hz: float = setting(15.0, gt=0.0, le=240.0)
+
+
+@dataclass(frozen=True)
+class LibcameraSettings:
+    camera_index: int = setting(0, ge=0)
+    width: int = setting(1280, ge=16, le=8192)
+    height: int = setting(960, ge=16, le=8192)
+    rate_hz: float = setting(15.0, gt=0.0, le=240.0)
+
+
+@dataclass(frozen=True)
+class ReplayCameraSettings:
+    file: str = setting("", doc="MCAP recording to play back")
+    speed: float = setting(1.0, ge=0.0, le=1000.0, doc="1 = recorded rate; 0 = as fast as read")
+    loop: bool = setting(False, doc="start again at the end instead of reporting end of file")
+
+
+@dataclass(frozen=True)
+class CameraSettings:
+    backend: str = setting("sim", doc="sim | replay | v4l2 | libcamera")
+    read_timeout_s: float = setting(1.0, gt=0.0, le=60.0, doc="a read longer than this is a stall")
+    sim: SimCameraSettings = setting(default_factory=SimCameraSettings)
+    v4l2: V4L2Settings = setting(default_factory=V4L2Settings)
+    libcamera: LibcameraSettings = setting(default_factory=LibcameraSettings)
+    replay: ReplayCameraSettings = setting(default_factory=ReplayCameraSettings)
+    encoding: Literal["bgr", "grey"] = setting("bgr", doc="colour layout handed to the daemon")

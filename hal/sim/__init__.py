@@ -1,0 +1,1 @@
+"""The built-in simulated robot and world: rendered mirror camera, drifting odometry."""

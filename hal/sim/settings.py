@@ -1,0 +1,27 @@
+"""Settings shared by the `sim` camera and base backends (one simulated robot)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from daemon.settings import setting
+
+
+@dataclass(frozen=True)
+class SimSettings:
+    world: str = setting(
+        "generate:office:1",
+        doc="world TOML path, or generate:<kind>:<seed> for a generated world",
+    )
+    scenario: str = setting("", doc="scenario TOML path; empty: the robot stands still")
+    seed: int = setting(1, ge=0, doc="seed of the simulator's noise and drift")
+    realtime: bool = setting(
+        True, doc="run on the wall clock (daemon) or in lock-step with frame reads (evaluation)"
+    )
+    start_pose: list[float] = setting(
+        [0.0, 0.0, 0.0], doc="x, y, yaw in the world frame; used when no scenario is set"
+    )
+
+    def __post_init__(self) -> None:
+        if len(self.start_pose) != 3:
+            raise ValueError("start_pose must be [x, y, yaw]")

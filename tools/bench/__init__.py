@@ -1,0 +1,1 @@
+"""placecell-bench: speed figures of the pipeline, medians of repeated runs."""

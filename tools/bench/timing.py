@@ -1,0 +1,33 @@
+"""Timing helpers for benchmarks: medians of repeated runs on one core."""
+
+from __future__ import annotations
+
+import os
+import statistics
+import time
+from collections.abc import Callable
+
+
+def pin_to_one_core() -> None:
+    """Run the benchmark on one core (and tell OpenCV to use one thread)."""
+    import cv2
+
+    cv2.setNumThreads(1)
+    if hasattr(os, "sched_setaffinity"):
+        cpus = sorted(os.sched_getaffinity(0))
+        os.sched_setaffinity(0, {cpus[0]})
+
+
+def median_seconds(fn: Callable[[], object], repeats: int, inner: int = 1,
+                   warmup: int = 1) -> float:
+    """Median over ``repeats`` runs of the time of one call of ``fn`` (each run times
+    ``inner`` calls and divides), after ``warmup`` untimed calls."""
+    for _ in range(warmup):
+        fn()
+    samples = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(inner):
+            fn()
+        samples.append((time.perf_counter() - t0) / inner)
+    return statistics.median(samples)

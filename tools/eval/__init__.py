@@ -1,0 +1,1 @@
+"""placecell-eval: experiments run through the daemon's own pipeline on the simulated robot."""

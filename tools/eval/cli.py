@@ -1,0 +1,70 @@
+"""``placecell-eval EXPERIMENT [--world-kind K] [--world-seed N] [--seed N] [--json] [--plots DIR]``
+
+Each experiment lives in ``tools/eval/<module>.py`` and provides
+``add_arguments(parser)`` and ``run(args) -> dict`` returning ``{"metrics": {...},
+"config": {...}}`` (plus optional ``"world"``). This file dispatches and prints one JSON
+object ``{"experiment", "world": {kind, seed}, "seed", "config", "metrics"}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import logging
+import sys
+from typing import Any
+
+from daemon.errors import PlacecellError
+
+# experiment -> (module, default world kind, one-line help)
+EXPERIMENTS: dict[str, tuple[str, str, str]] = {
+    "depth": ("tools.eval.depth", "open-room", "TBL depth-estimate error (SPEC §3.3)"),
+    "recognition-range": (
+        "tools.eval.recognition_range", "office", "area where a place's LRP stays up (§3.4)"
+    ),
+    "recognise": ("tools.eval.recognise", "", "LRP of a landmark set in real images"),
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="placecell-eval", description=__doc__)
+    sub = parser.add_subparsers(dest="experiment", required=True)
+    for name, (module_name, world_kind, help_text) in EXPERIMENTS.items():
+        p = sub.add_parser(name, help=help_text)
+        p.set_defaults(_module=module_name)
+        p.add_argument("--world-kind", default=world_kind or None)
+        p.add_argument("--world-seed", type=int, default=1)
+        p.add_argument("--seed", type=int, default=1, help="seed of the experiment's randomness")
+        p.add_argument("--json", action="store_true", help="print one JSON object")
+        p.add_argument("--plots", metavar="DIR", help="write PNG figures into DIR")
+        try:
+            importlib.import_module(module_name).add_arguments(p)
+        except ModuleNotFoundError as e:
+            if e.name != module_name:
+                raise
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING if args.json else logging.INFO,
+                        format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+    try:
+        result: dict[str, Any] = importlib.import_module(args._module).run(args)
+    except PlacecellError as e:
+        print(f"placecell-eval {args.experiment}: error: {e}", file=sys.stderr)
+        return 2
+    out = {
+        "experiment": args.experiment,
+        "world": result.get("world", {"kind": args.world_kind, "seed": args.world_seed}),
+        "seed": args.seed,
+        "config": result.get("config", {}),
+        "metrics": result["metrics"],
+    }
+    if args.json:
+        print(json.dumps(out, indent=2, sort_keys=True))
+    else:
+        for key, value in out["metrics"].items():
+            print(f"{key:32s} {value}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
