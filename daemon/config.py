@@ -53,7 +53,7 @@ class MapSettings:
 class ServiceSettings:
     status_period_s: float = setting(1.0, gt=0.0, le=60.0)
     restart_backoff_initial_s: float = setting(0.2, gt=0.0, le=60.0)
-    restart_backoff_max_s: float = setting(5.0, gt=0.0, le=600.0)
+    restart_backoff_max_s: float = setting(1.0, gt=0.0, le=600.0)
     stop_timeout_s: float = setting(1.5, gt=0.0, le=30.0, doc="grace period on SIGTERM")
     stale_after_s: float = setting(1.0, gt=0.0, le=60.0, doc="a device silent this long is faulty")
 

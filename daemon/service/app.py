@@ -1,0 +1,223 @@
+"""The daemon: devices, the supervised loop, zenoh, and systemd integration (SPEC §11)."""
+
+from __future__ import annotations
+
+import json
+import logging
+import platform
+import signal
+import threading
+import time
+from typing import Any
+
+import cv2
+import numpy as np
+import zenoh
+
+import daemon
+from daemon.config import PlacecellConfig
+from daemon.localisation.localiser import Belief, Localiser
+from daemon.service import zenoh_link
+from daemon.service.components import (
+    BaseComponent,
+    CameraComponent,
+    LatestFrame,
+    OdometryInbox,
+    ProcessingComponent,
+)
+from daemon.service.notify import Notifier
+from daemon.service.supervisor import Supervisor, describe
+from hal.registry import HalContext, create_base, create_camera
+
+log = logging.getLogger(__name__)
+
+
+class Daemon:
+    """One running placecell service. ``run()`` blocks until ``request_stop()``."""
+
+    def __init__(self, config: PlacecellConfig, notifier: Notifier | None = None,
+                 recorder: Any = None) -> None:
+        self.config = config
+        self.notifier = notifier or Notifier()
+        self.recorder = recorder
+        self.robot = config.robot.name
+        self._stop = threading.Event()
+        self._started_ns = time.monotonic_ns()
+        self._session: zenoh.Session | None = None
+        self._publishers: dict[str, Any] = {}
+        self._belief: Belief | None = None
+        self._status_lock = threading.Lock()
+        self._last_status: bytes = b""
+        self.hal = HalContext(config)
+        self.supervisor = Supervisor(
+            config.service.restart_backoff_initial_s, config.service.restart_backoff_max_s,
+            on_event=self.publish_event,
+        )
+        self._build_components()
+
+    # ------------------------------------------------------------------ set-up
+    def _build_components(self) -> None:
+        cfg = self.config
+        mailbox = LatestFrame()
+        inbox = OdometryInbox()
+        frame_taps, odo_taps = [], []
+        if self.recorder is not None:
+            frame_taps.append(self.recorder.write_frame)
+            odo_taps.append(self._record_odometry)
+        sup = self.supervisor
+        self.camera = CameraComponent(
+            lambda: create_camera(cfg.camera, self.hal), cfg.camera.read_timeout_s, mailbox,
+            lambda: sup.health["camera"], frame_taps)
+        self.base = BaseComponent(
+            lambda: create_base(cfg.base, self.hal), cfg.base.read_timeout_s, inbox.put,
+            lambda: sup.health["base"], odo_taps)
+        self.processing = ProcessingComponent(
+            lambda: Localiser(cfg.mirror, cfg.panorama), mailbox, inbox, self._on_belief,
+            lambda: sup.health["processing"])
+        for c in (self.camera, self.base, self.processing):
+            sup.add(c)
+
+    def _record_odometry(self, samples: list[Any], base: Any) -> None:
+        for s in samples:
+            self.recorder.write_odometry(s)
+
+    # ------------------------------------------------------------------ zenoh
+    def _open_zenoh(self) -> None:
+        z = self.config.zenoh
+        self._session = zenoh_link.open_session(z.mode, z.listen, z.connect, z.multicast_scouting)
+        s = self._session
+        self._token = s.liveliness().declare_token(zenoh_link.key(self.robot, "alive"))
+        for leaf in ("status", "events", "belief"):
+            self._publishers[leaf] = s.declare_publisher(zenoh_link.key(self.robot, leaf))
+        # Late joiners (placecellctl status) get the latest status at once by query.
+        self._status_queryable = s.declare_queryable(
+            zenoh_link.key(self.robot, "status"), self._answer_status)
+        log.info("zenoh session %s: listening on %s, connecting to %s, multicast scouting %s",
+                 s.zid(), z.listen, z.connect, "on" if z.multicast_scouting else "off")
+
+    def _answer_status(self, query: zenoh.Query) -> None:
+        try:
+            query.reply(query.key_expr, self.status_payload())
+        except Exception as e:  # noqa: BLE001 - a client must never crash the daemon
+            log.warning("status query failed: %s", e)
+
+    def publish(self, leaf: str, payload: bytes) -> None:
+        pub = self._publishers.get(leaf)
+        if pub is not None:
+            try:
+                pub.put(payload)
+            except Exception as e:  # noqa: BLE001 - zenoh shutting down
+                log.debug("publish %s failed: %s", leaf, e)
+
+    def publish_event(self, kind: str, **fields: Any) -> None:
+        body = {"event": kind, "stamp_ns": time.monotonic_ns(), **fields}
+        log.info("event %s", json.dumps(body))
+        self.publish("events", zenoh_link.encode("placecell.event", body))
+
+    def _on_belief(self, belief: Belief) -> None:
+        self._belief = belief
+        self.publish("belief", zenoh_link.encode("placecell.belief", _belief_body(belief)))
+        if self.recorder is not None:
+            self.recorder.write_json("belief", belief.stamp_ns, _belief_body(belief))
+
+    # ------------------------------------------------------------------ status
+    def status(self) -> dict[str, Any]:
+        now = time.monotonic_ns()
+        health = self.supervisor.health
+        belief = self._belief
+        return {
+            "robot": self.robot,
+            "stamp_ns": now,
+            "uptime_s": round((now - self._started_ns) / 1e9, 3),
+            "healthy": self.supervisor.all_running(),
+            "components": describe(health, now),
+            "rates": {
+                "frames_hz": round(health["camera"].rate.rate_hz(now), 2),
+                "odometry_hz": round(health["base"].rate.rate_hz(now), 2),
+                "processed_hz": round(health["processing"].rate.rate_hz(now), 2),
+            },
+            "belief": None if belief is None else {"state": belief.state,
+                                                   "reason": belief.reason},
+            "map": {"path": self.config.map.path, "places": 0},
+            "versions": {
+                "placecell": daemon.__version__,
+                "python": platform.python_version(),
+                "zenoh": _zenoh_version(),
+                "opencv": cv2.__version__,
+                "numpy": np.__version__,
+            },
+        }
+
+    def status_payload(self) -> bytes:
+        return zenoh_link.encode("placecell.status", self.status())
+
+    # ------------------------------------------------------------------ run
+    def request_stop(self, *_: Any) -> None:
+        self._stop.set()
+
+    def install_signal_handlers(self) -> None:
+        signal.signal(signal.SIGTERM, self.request_stop)
+        signal.signal(signal.SIGINT, self.request_stop)
+
+    def run(self) -> int:
+        self._open_zenoh()
+        self.supervisor.start()
+        ready = False
+        period = self.config.service.status_period_s
+        watchdog_s = self.notifier.watchdog_interval_s
+        tick = min(0.1, period, watchdog_s / 2 if watchdog_s else 0.1)
+        next_status = time.monotonic()
+        next_watchdog = time.monotonic()
+        startup_deadline = time.monotonic() + 30.0
+        while not self._stop.is_set():
+            now = time.monotonic()
+            if not ready and (self.supervisor.all_running() or now > startup_deadline):
+                # READY once devices are up (or after a grace period: a missing device is
+                # then reported through status and retried, not a reason to hang start-up).
+                self.notifier.ready("devices up" if self.supervisor.all_running()
+                                    else "running with device faults")
+                self.publish_event("started", healthy=self.supervisor.all_running())
+                ready = True
+            if now >= next_status:
+                self.publish("status", self.status_payload())
+                next_status = now + period
+            if watchdog_s and now >= next_watchdog:
+                # WATCHDOG only while the loop is healthy: every component thread alive and
+                # cycling (devices in backoff are reported in status, not fatal).
+                if self.supervisor.threads_alive(max_silence_s=max(5.0, watchdog_s)):
+                    self.notifier.watchdog()
+                next_watchdog = now + watchdog_s / 2
+            self._stop.wait(tick)
+        return self._shutdown()
+
+    def _shutdown(self) -> int:
+        log.info("stopping")
+        self.notifier.stopping()
+        self.supervisor.stop(self.config.service.stop_timeout_s)
+        self.publish_event("stopped")
+        if self.recorder is not None:
+            self.recorder.close()
+        if self._session is not None:
+            try:
+                self._token.undeclare()
+                self._session.close()
+            except Exception as e:  # noqa: BLE001 - best effort at exit
+                log.warning("closing zenoh: %s", e)
+        self.notifier.close()
+        log.info("stopped")
+        return 0
+
+
+def _belief_body(belief: Belief) -> dict[str, Any]:
+    return {"stamp_ns": belief.stamp_ns, "state": belief.state, "reason": belief.reason,
+            "odometry_ok": belief.odometry_ok, "place_id": belief.place_id,
+            "pose_in_place": belief.pose_in_place}
+
+
+def _zenoh_version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("eclipse-zenoh")
+    except Exception:  # noqa: BLE001
+        return "unknown"

@@ -1,0 +1,165 @@
+"""The supervised components of the daemon: the camera, the base and the processing step."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import threading
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+from daemon.localisation.localiser import Belief, Localiser
+from daemon.service.health import ComponentHealth, RateMeter
+from hal.base.base import Base, Odometry
+from hal.camera.base import Camera, Frame
+
+log = logging.getLogger(__name__)
+
+
+class LatestFrame:
+    """A one-slot mailbox: the processing step always takes the newest frame; frames it
+    had no time for are counted as skipped, never queued up (latency stays low)."""
+
+    def __init__(self) -> None:
+        self._cond = threading.Condition()
+        self._frame: Frame | None = None
+        self.skipped = 0
+
+    def put(self, frame: Frame) -> None:
+        with self._cond:
+            if self._frame is not None:
+                self.skipped += 1
+            self._frame = frame
+            self._cond.notify()
+
+    def take(self, timeout: float) -> Frame | None:
+        with self._cond:
+            if self._frame is None:
+                self._cond.wait(timeout)
+            frame, self._frame = self._frame, None
+            return frame
+
+
+class CameraComponent:
+    name = "camera"
+
+    def __init__(self, make_camera: Callable[[], Camera], timeout_s: float,
+                 mailbox: LatestFrame, health: Callable[[], ComponentHealth],
+                 taps: Sequence[Callable[[Frame], None]]) -> None:
+        self._make = make_camera
+        self._timeout_s = timeout_s
+        self._mailbox = mailbox
+        self._health = health
+        self._taps = taps
+        self.device: Camera | None = None
+
+    def setup(self) -> None:
+        self.device = self._make()
+        self.device.open()
+        self._health().detail["device"] = _info(self.device)
+
+    def step(self) -> None:
+        assert self.device is not None  # set by setup(), which the supervisor runs first
+        frame = self.device.read(self._timeout_s)
+        self._health().rate.tick()
+        for tap in self._taps:
+            tap(frame)
+        self._mailbox.put(frame)
+        self._health().detail["stats"] = dict(self.device.stats())
+
+    def teardown(self) -> None:
+        if self.device is not None:
+            self.device.close()
+            self.device = None
+
+
+class BaseComponent:
+    name = "base"
+
+    def __init__(self, make_base: Callable[[], Base], timeout_s: float,
+                 sink: Callable[[list[Odometry]], None], health: Callable[[], ComponentHealth],
+                 taps: Sequence[Callable[[list[Odometry], Base], None]]) -> None:
+        self._make = make_base
+        self._timeout_s = timeout_s
+        self._sink = sink
+        self._health = health
+        self._taps = taps
+        self.device: Base | None = None
+
+    def setup(self) -> None:
+        self.device = self._make()
+        self.device.open()
+        self._health().detail["device"] = _info(self.device)
+
+    def step(self) -> None:
+        assert self.device is not None  # set by setup(), which the supervisor runs first
+        samples = self.device.read(self._timeout_s)
+        self._health().rate.tick(len(samples))
+        for tap in self._taps:
+            tap(samples, self.device)
+        self._sink(samples)
+        self._health().detail["stats"] = dict(self.device.stats())
+        self._health().detail["flags"] = self.device.status().to_flags()
+
+    def teardown(self) -> None:
+        if self.device is not None:
+            self.device.close()
+            self.device = None
+
+
+class ProcessingComponent:
+    """Feeds frames and odometry to the localiser and hands each belief on."""
+
+    name = "processing"
+
+    def __init__(self, make_localiser: Callable[[], Localiser], mailbox: LatestFrame,
+                 odometry_inbox: OdometryInbox, on_belief: Callable[[Belief], None],
+                 health: Callable[[], ComponentHealth]) -> None:
+        self._make = make_localiser
+        self._mailbox = mailbox
+        self._odometry = odometry_inbox
+        self._on_belief = on_belief
+        self._health = health
+        self.localiser: Localiser | None = None
+        self.timings = RateMeter()
+
+    def setup(self) -> None:
+        self.localiser = self._make()
+
+    def step(self) -> None:
+        assert self.localiser is not None  # set by setup(), which the supervisor runs first
+        self.localiser.add_odometry(self._odometry.drain())
+        frame = self._mailbox.take(timeout=0.2)
+        if frame is None:
+            return
+        belief = self.localiser.process_frame(frame)
+        self._health().rate.tick()
+        self._health().detail["timings_ms"] = belief.timings_ms
+        self._health().detail["skipped_frames"] = self._mailbox.skipped
+        self._on_belief(belief)
+
+    def teardown(self) -> None:
+        self.localiser = None
+
+
+class OdometryInbox:
+    """Thread-safe hand-over of odometry samples from the base thread to processing."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._samples: list[Odometry] = []
+
+    def put(self, samples: list[Odometry]) -> None:
+        with self._lock:
+            self._samples.extend(samples)
+
+    def drain(self) -> list[Odometry]:
+        with self._lock:
+            out, self._samples = self._samples, []
+            return out
+
+
+def _info(device: Any) -> dict[str, Any]:
+    """A device's info dataclass as JSON-able data."""
+    return {k: (dict(v) if isinstance(v, Mapping) else v)
+            for k, v in dataclasses.asdict(device.info).items()}
