@@ -17,6 +17,7 @@ import zenoh
 import daemon
 from daemon.config import PlacecellConfig
 from daemon.localisation.localiser import Belief, Localiser
+from daemon.mapping.store import MapStore
 from daemon.service import zenoh_link
 from daemon.service.components import (
     BaseComponent,
@@ -27,6 +28,7 @@ from daemon.service.components import (
 )
 from daemon.service.notify import Notifier
 from daemon.service.supervisor import Supervisor, describe
+from daemon.vision.panorama import geometry_checksum
 from hal.registry import HalContext, create_base, create_camera
 
 log = logging.getLogger(__name__)
@@ -49,6 +51,9 @@ class Daemon:
         self._status_lock = threading.Lock()
         self._last_status: bytes = b""
         self.hal = HalContext(config)
+        # The map first: a map made with another geometry stops the daemon before any device.
+        self.map = MapStore.open(config.map.path, geometry_checksum(config.mirror,
+                                                                    config.panorama))
         self.supervisor = Supervisor(
             config.service.restart_backoff_initial_s, config.service.restart_backoff_max_s,
             on_event=self.publish_event,
@@ -72,8 +77,8 @@ class Daemon:
             lambda: create_base(cfg.base, self.hal), cfg.base.read_timeout_s, inbox.put,
             lambda: sup.health["base"], odo_taps)
         self.processing = ProcessingComponent(
-            lambda: Localiser(cfg.mirror, cfg.panorama), mailbox, inbox, self._on_belief,
-            lambda: sup.health["processing"])
+            lambda: Localiser(cfg.mirror, cfg.panorama, places=self.map.place_count()),
+            mailbox, inbox, self._on_belief, lambda: sup.health["processing"])
         for c in (self.camera, self.base, self.processing):
             sup.add(c)
 
@@ -138,7 +143,8 @@ class Daemon:
             },
             "belief": None if belief is None else {"state": belief.state,
                                                    "reason": belief.reason},
-            "map": {"path": self.config.map.path, "places": 0},
+            "map": {"path": self.config.map.path, "places": self.map.place_count(),
+                    "transitions": self.map.transition_count()},
             "versions": {
                 "placecell": daemon.__version__,
                 "python": platform.python_version(),
@@ -197,6 +203,7 @@ class Daemon:
         self.publish_event("stopped")
         if self.recorder is not None:
             self.recorder.close()
+        self.map.close()
         if self._session is not None:
             try:
                 self._token.undeclare()

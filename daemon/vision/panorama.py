@@ -75,3 +75,15 @@ def to_grey(image: np.ndarray) -> np.ndarray:
     if image.ndim == 2:
         return image
     return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+
+
+def geometry_checksum(mirror: object, panorama: object) -> str:
+    """A short digest of everything that defines the panorama geometry (mirror model and
+    panorama settings): the map store refuses a map made with another one (SPEC §6)."""
+    import dataclasses
+    import hashlib
+    import json
+
+    doc = {"mirror": dataclasses.asdict(mirror),  # type: ignore[call-overload]
+           "panorama": dataclasses.asdict(panorama)}  # type: ignore[call-overload]
+    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
