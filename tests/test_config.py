@@ -37,7 +37,7 @@ def test_print_config_round_trips() -> None:
         ({"camera": {"sim": {"rate_hz": 0}}}, "config.camera.sim.rate_hz: 0.0 is out of range"),
         ({"zenoh": {"mode": "router"}}, "config.zenoh.mode: 'router' is not one of"),
         ({"camera": {"backend": "webcam"}}, "camera.backend 'webcam' is not one of"),
-        ({"mirror": {"r_inner_px": 300.0}}, "r_outer_px (230.0) must be larger than r_inner_px"),
+        ({"mirror": {"r_inner_px": 300.0}}, "r_outer_px (228.0) must be larger than r_inner_px"),
         ({"robot": {"name": "a/b"}}, "robot.name 'a/b' must be"),
     ],
 )

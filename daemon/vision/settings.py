@@ -17,12 +17,12 @@ class MirrorSettings:
     )
     center_x_px: float = setting(320.0, ge=0.0, doc="donut centre, image column")
     center_y_px: float = setting(240.0, ge=0.0, doc="donut centre, image row")
-    r_inner_px: float = setting(40.0, gt=0.0, doc="inner donut radius used for the panorama")
-    r_outer_px: float = setting(230.0, gt=0.0, doc="outer donut radius used for the panorama")
+    r_inner_px: float = setting(50.0, gt=0.0, doc="inner donut radius used for the panorama")
+    r_outer_px: float = setting(228.0, gt=0.0, doc="outer donut radius used for the panorama")
     # Hyperboloid (X²+Y²)/a² − Z²/b² = −1, foci at ±c, c² = a² + b² (SPEC §2).
     a_m: float = setting(0.0233, gt=0.0, doc="hyperboloid semi-axis a")
     b_m: float = setting(0.0281, gt=0.0, doc="hyperboloid semi-axis b")
-    focal_px: float = setting(600.0, gt=0.0, doc="camera focal length in pixels")
+    focal_px: float = setting(520.0, gt=0.0, doc="camera focal length in pixels")
     # Polynomial model: normalised radius (0 at r_inner, 1 at r_outer) as a polynomial
     # of the normalised panorama row counted from the bottom (0) to the top (1).
     poly_coeffs: list[float] = setting([0.0, 1.0], doc="radial polynomial, lowest order first")
