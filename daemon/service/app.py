@@ -187,7 +187,7 @@ class Daemon:
             if now >= next_status:
                 self.publish("status", self.status_payload())
                 next_status = now + period
-            if watchdog_s and now >= next_watchdog:
+            if ready and watchdog_s and now >= next_watchdog:
                 # WATCHDOG only while the loop is healthy: every component thread alive and
                 # cycling (devices in backoff are reported in status, not fatal).
                 if self.supervisor.threads_alive(max_silence_s=max(5.0, watchdog_s)):

@@ -42,7 +42,8 @@ def hyperboloid_radius(phi: np.ndarray, a: float, b: float, focal_px: float) -> 
     s = np.where(roots > 0, roots, np.inf).min(axis=0)
     rho = s * c_phi
     z = c + s * s_phi
-    r = focal_px * rho / (z + c)  # pinhole at (0, 0, −c), optical axis +Z
+    with np.errstate(invalid="ignore"):
+        r = focal_px * rho / (z + c)  # pinhole at (0, 0, −c), optical axis +Z
     return np.where(np.isfinite(r), r, np.nan)
 
 

@@ -150,6 +150,7 @@ class Renderer:
         with np.errstate(divide="ignore", invalid="ignore"):
             d_ceil = np.where(tan_phi > 0, (wall_h - h) / tan_phi, np.inf)
             d_floor = np.where(tan_phi < 0, h / -tan_phi, np.inf)
+        d_ceil = np.where(np.isfinite(d_ceil), d_ceil, 0.0)
         cx = x + d_ceil * np.cos(angles)[None, :]
         cy = y + d_ceil * np.sin(angles)[None, :]
         grid = (np.abs(np.mod(cx, 0.6) - 0.3) > 0.28) | (np.abs(np.mod(cy, 0.6) - 0.3) > 0.28)

@@ -1,0 +1,43 @@
+"""Builds the one simulated robot of a configuration (shared by the sim camera and base)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from hal.sim.render import Renderer
+from hal.sim.robot import SimRobot
+from hal.sim.scenario import Scenario, load_scenario
+from hal.sim.world import load_world
+
+
+def build_sim_robot(config: Any, scenario: Scenario | None = None) -> SimRobot:
+    """A SimRobot from a PlacecellConfig; the scenario (config.sim.scenario, or the one
+    given) may override the world, start pose, frame rate, noise and drift."""
+    sim = config.sim
+    if scenario is None and sim.scenario:
+        scenario = load_scenario(sim.scenario)
+    world = load_world(scenario.world if scenario else sim.world)
+    camera = config.camera.sim
+    base = config.base.sim
+    if scenario is not None:
+        if scenario.frame_rate_hz is not None:
+            camera = dataclasses.replace(camera, rate_hz=scenario.frame_rate_hz)
+        if scenario.drift:
+            base = dataclasses.replace(base, **scenario.drift)
+    start = tuple(sim.start_pose)
+    if scenario is not None and scenario.start_pose is not None:
+        start = scenario.start_pose
+    elif not sim.scenario and tuple(sim.start_pose) == (0.0, 0.0, 0.0):
+        start = world.start_pose  # the world's own start when none is configured
+    renderer = Renderer(world, config.mirror, config.panorama,
+                        (camera.image_width, camera.image_height))
+    return SimRobot(renderer, camera, base, seed=sim.seed, realtime=sim.realtime,
+                    start_pose=(float(start[0]), float(start[1]), float(start[2])),
+                    scenario=scenario)
+
+
+def shared_sim_robot(context: Any) -> SimRobot:
+    """The context's one simulated robot, built on first use."""
+    robot: SimRobot = context.shared("sim.robot", lambda: build_sim_robot(context.config))
+    return robot

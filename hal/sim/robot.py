@@ -1,0 +1,317 @@
+"""The simulated robot: one holonomic base and one mirror camera in a simulated world.
+
+Shared by the `sim` camera and `sim` base backends (through ``HalContext``). Time is
+simulated in fixed odometry steps (50 Hz by default) and runs either on the wall clock
+(``realtime``: the daemon) or in lock-step with the readers (evaluation and tests: each
+camera read advances to the next frame time, so runs are fast and deterministic).
+
+Motion: relative moves (trapezoidal speed profile under speed and acceleration limits) and
+velocity commands, in the robot frame; a scenario's autopilot drives the robot until a
+command arrives. Odometry integrates the true motion distorted by drift (SPEC §10): a scale
+error, a heading bias per metre, and random walks per square-root metre.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from daemon.errors import CommandRejectedError
+from daemon.vision.panorama import wrap_angle
+from hal.base.base import BaseStatus, Odometry
+from hal.base.settings import SimBaseSettings
+from hal.camera.base import Frame
+from hal.camera.settings import SimCameraSettings
+from hal.sim.render import Renderer
+from hal.sim.scenario import Scenario
+
+
+@dataclass
+class _Move:
+    """A relative move in progress, as a straight world-frame line plus a rotation."""
+
+    start: tuple[float, float, float]
+    goal: tuple[float, float, float]
+    speed: float
+    yaw_rate: float
+    progress: float = 0.0  # metres along the line
+    v: float = 0.0  # current speed along the line
+    turned: float = 0.0  # radians turned so far
+    w: float = 0.0
+
+
+class SimRobot:
+    def __init__(self, renderer: Renderer, camera: SimCameraSettings, base: SimBaseSettings,
+                 *, seed: int, realtime: bool, start_pose: tuple[float, float, float],
+                 scenario: Scenario | None = None) -> None:
+        self.renderer = renderer
+        self.camera = camera
+        self.base = base
+        self.realtime = realtime
+        self.scenario = scenario
+        self._lock = threading.RLock()
+        self._dt_ns = int(round(1e9 / base.odometry_rate_hz))
+        self._frame_ns = int(round(1e9 / camera.rate_hz))
+        self._rng = np.random.default_rng([seed, 17])
+        self._camera_rng = np.random.default_rng([seed, 23])
+        self._t_ns = 0  # simulated time since start
+        self._mono0 = time.monotonic_ns()
+        self._pose = start_pose  # true pose, world frame
+        self._odo = (0.0, 0.0, 0.0)  # odometry pose, odometry frame
+        self._vel = (0.0, 0.0, 0.0)  # velocity command (robot frame)
+        self._current = (0.0, 0.0, 0.0)  # body velocity of the last step
+        self._move: _Move | None = None
+        self._commanded = False  # a daemon command took over from the autopilot
+        self._move_done = False
+        self._samples: list[Odometry] = []
+        self._odo_seq = 0
+        self._frame_seq = 0
+        self._next_frame_ns = 0
+        self._kidnaps_done = 0
+        self._waypoint = 0  # the scenario autopilot's next waypoint
+        self._travelled = 0.0
+
+    # ------------------------------------------------------------------ time
+    def now_ns(self) -> int:
+        """Stamp of the current simulated time on the clock frames and odometry share."""
+        return self._stamp(self._t_ns)
+
+    def _stamp(self, t_ns: int) -> int:
+        return self._mono0 + t_ns if self.realtime else t_ns
+
+    def wall_time_ns(self) -> int:
+        """Simulated time that corresponds to now (realtime mode)."""
+        return time.monotonic_ns() - self._mono0
+
+    def advance_to(self, t_ns: int) -> None:
+        """Step the simulation until simulated time ``t_ns``."""
+        with self._lock:
+            while self._t_ns + self._dt_ns <= t_ns:
+                self._step()
+
+    def _step(self) -> None:
+        dt = self._dt_ns / 1e9
+        self._t_ns += self._dt_ns
+        if self.scenario is not None:
+            kidnap = self.scenario.kidnap_due(self._t_ns / 1e9, self._kidnaps_done)
+            if kidnap is not None:
+                self._kidnaps_done += 1
+                self._pose = kidnap  # teleport: odometry knows nothing of it
+        vx, vy, w = self._velocity(dt)
+        x, y, yaw = self._pose
+        # Exact integration for constant body velocity over dt (midpoint heading).
+        mid = yaw + 0.5 * w * dt
+        dx_w = (vx * math.cos(mid) - vy * math.sin(mid)) * dt
+        dy_w = (vx * math.sin(mid) + vy * math.cos(mid)) * dt
+        self._pose = (x + dx_w, y + dy_w, float(wrap_angle(yaw + w * dt)))
+        self._integrate_odometry(vx * dt, vy * dt, w * dt, mid - yaw)
+        self._odo_seq += 1
+        ox, oy, oyaw = self._odo
+        self._samples.append(Odometry(ox, oy, oyaw, self._stamp(self._t_ns), self._odo_seq))
+        if len(self._samples) > 10_000:  # nobody reads: keep memory bounded
+            del self._samples[:5_000]
+
+    def _integrate_odometry(self, dx: float, dy: float, dyaw: float, half: float) -> None:
+        """Odometry = true body motion with drift (SPEC §10)."""
+        b = self.base
+        ds = math.hypot(dx, dy)
+        self._travelled += ds
+        if ds > 0:
+            noise = self._rng.normal(0.0, 1.0, 3)
+            scale = 1.0 + b.scale_error
+            dx = dx * scale + b.random_walk_m_per_sqrt_m * math.sqrt(ds) * noise[0]
+            dy = dy * scale + b.random_walk_m_per_sqrt_m * math.sqrt(ds) * noise[1]
+            dyaw = dyaw + b.heading_bias_rad_per_m * ds + (
+                b.random_walk_rad_per_sqrt_m * math.sqrt(ds) * noise[2])
+        ox, oy, oyaw = self._odo
+        mid = oyaw + half
+        self._odo = (ox + dx * math.cos(mid) - dy * math.sin(mid),
+                     oy + dx * math.sin(mid) + dy * math.cos(mid),
+                     float(wrap_angle(oyaw + dyaw)))
+
+    def _velocity(self, dt: float) -> tuple[float, float, float]:
+        """Body velocity for the next step: a move in progress, a velocity command, or the
+        scenario's autopilot."""
+        if self._move is not None:
+            return self._move_velocity(self._move, dt)
+        if self._commanded or self.scenario is None:
+            return self._limit(self._vel, dt)
+        target, self._waypoint = self.scenario.autopilot(self._pose, self._waypoint)
+        return self._limit(target, dt)
+
+    def _limit(self, target: tuple[float, float, float], dt: float
+               ) -> tuple[float, float, float]:
+        """Accelerate the current velocity toward ``target`` under the base's limits."""
+        b = self.base
+        vx, vy, w = self._current
+        tx, ty, tw = target
+        speed = math.hypot(tx, ty)
+        if speed > b.max_speed_m_s:
+            tx, ty = tx * b.max_speed_m_s / speed, ty * b.max_speed_m_s / speed
+        tw = max(-b.max_yaw_rate_rad_s, min(b.max_yaw_rate_rad_s, tw))
+        ex, ey = tx - vx, ty - vy
+        e = math.hypot(ex, ey)
+        step = b.max_accel_m_s2 * dt
+        if e > step:
+            ex, ey = ex * step / e, ey * step / e
+        dw = max(-b.max_yaw_accel_rad_s2 * dt, min(b.max_yaw_accel_rad_s2 * dt, tw - w))
+        self._current = (vx + ex, vy + ey, w + dw)
+        return self._current
+
+    def _move_velocity(self, m: _Move, dt: float) -> tuple[float, float, float]:
+        """Trapezoidal profile along the move's straight line and its rotation; the last
+        step lands exactly on the goal."""
+        b = self.base
+        sx, sy, syaw = m.start
+        gx, gy, gyaw = m.goal
+        length = math.hypot(gx - sx, gy - sy)
+        turn = float(wrap_angle(gyaw - syaw))
+        rem = length - m.progress
+        m.v = min(m.speed, m.v + b.max_accel_m_s2 * dt, math.sqrt(2 * b.max_accel_m_s2 * rem))
+        adv = min(rem, m.v * dt)
+        rem_turn = abs(turn) - m.turned
+        m.w = min(m.yaw_rate, m.w + b.max_yaw_accel_rad_s2 * dt,
+                  math.sqrt(2 * b.max_yaw_accel_rad_s2 * max(rem_turn, 0.0)))
+        adv_turn = min(rem_turn, m.w * dt)
+        if rem - adv < 1e-9 and m.v * dt >= rem:
+            adv = rem
+        m.progress += adv
+        m.turned += adv_turn
+        # Body velocity that moves the true pose along the line (world -> body at midpoint).
+        x, y, yaw = self._pose
+        f = m.progress / length if length > 0 else 1.0
+        tx, ty = sx + f * (gx - sx), sy + f * (gy - sy)
+        w = math.copysign(adv_turn, turn) / dt
+        mid = yaw + 0.5 * w * dt
+        wx, wy = (tx - x) / dt, (ty - y) / dt
+        vx = wx * math.cos(mid) + wy * math.sin(mid)
+        vy = -wx * math.sin(mid) + wy * math.cos(mid)
+        if m.progress >= length - 1e-12 and m.turned >= abs(turn) - 1e-12:
+            self._move = None
+            self._move_done = True
+            self._current = (0.0, 0.0, 0.0)
+        else:
+            self._current = (vx, vy, w)
+        return vx, vy, w
+
+    # ------------------------------------------------------------------ base side
+    def odometry_samples(self) -> list[Odometry]:
+        """Samples produced since the last call (drained)."""
+        with self._lock:
+            out, self._samples = self._samples, []
+            return out
+
+    def wait_odometry(self, timeout: float) -> list[Odometry]:
+        """Base read: realtime waits for the wall clock; lock-step advances one sample."""
+        with self._lock:
+            if not self.realtime and not self._samples:
+                self.advance_to(self._t_ns + self._dt_ns)
+        if self.realtime:
+            end = time.monotonic() + timeout
+            while True:
+                self.advance_to(self.wall_time_ns())
+                with self._lock:
+                    if self._samples:
+                        break
+                if time.monotonic() >= end:
+                    break
+                time.sleep(min(self._dt_ns / 1e9 / 2, max(0.0, end - time.monotonic())))
+        return self.odometry_samples()
+
+    def status(self) -> BaseStatus:
+        with self._lock:
+            moving = self._move is not None or math.hypot(*self._current[:2]) > 1e-6 or abs(
+                self._current[2]) > 1e-6
+            return BaseStatus(moving=moving, move_done=self._move_done)
+
+    def move_relative(self, dx: float, dy: float, dyaw: float, speed: float) -> None:
+        if not self.base.can_move:
+            raise CommandRejectedError("the simulated base is configured with can_move = false")
+        if speed <= 0 or not all(map(math.isfinite, (dx, dy, dyaw, speed))):
+            raise CommandRejectedError(f"invalid move ({dx}, {dy}, {dyaw}) at {speed} m/s")
+        with self._lock:
+            x, y, yaw = self._pose
+            goal = (x + dx * math.cos(yaw) - dy * math.sin(yaw),
+                    y + dx * math.sin(yaw) + dy * math.cos(yaw), float(wrap_angle(yaw + dyaw)))
+            self._commanded = True
+            self._move_done = False
+            self._move = _Move(self._pose, goal, min(speed, self.base.max_speed_m_s),
+                               self.base.max_yaw_rate_rad_s)
+
+    def velocity(self, vx: float, vy: float, w: float) -> None:
+        if not self.base.can_move:
+            raise CommandRejectedError("the simulated base is configured with can_move = false")
+        with self._lock:
+            self._commanded = True
+            self._move = None
+            self._move_done = False
+            self._vel = (vx, vy, w)
+
+    def stop(self) -> None:
+        with self._lock:
+            self._commanded = True
+            self._move = None
+            self._vel = (0.0, 0.0, 0.0)
+
+    def kidnap(self, x: float, y: float, yaw: float) -> None:
+        """Teleport the robot; odometry does not notice (SPEC §9.6)."""
+        with self._lock:
+            self._pose = (x, y, float(wrap_angle(yaw)))
+            self._move = None
+            self._current = (0.0, 0.0, 0.0)
+
+    def true_pose(self) -> tuple[float, float, float]:
+        return self._pose
+
+    def odometry_pose(self) -> tuple[float, float, float]:
+        return self._odo
+
+    def ground_truth(self) -> tuple[int, tuple[float, float, float]]:
+        """(stamp_ns, true pose): for recordings and evaluation, never for the method."""
+        with self._lock:
+            return self.now_ns(), self._pose
+
+    @property
+    def travelled_m(self) -> float:
+        return self._travelled
+
+    # ------------------------------------------------------------------ camera side
+    def next_frame(self, timeout: float) -> Frame | None:
+        """Camera read: realtime waits for the next frame time (None after ``timeout``);
+        lock-step advances the simulation to it at once."""
+        with self._lock:
+            due = max(self._next_frame_ns, self._t_ns)
+        if self.realtime:
+            wait = (due - self.wall_time_ns()) / 1e9
+            if wait > timeout:
+                time.sleep(timeout)
+                return None
+            if wait > 0:
+                time.sleep(wait)
+            due = max(due, self.wall_time_ns())
+        self.advance_to(due)
+        with self._lock:
+            self._next_frame_ns = (self._t_ns // self._frame_ns + 1) * self._frame_ns
+            return self.render_frame()
+
+    def render_frame(self) -> Frame:
+        """The raw donut at the current simulated time."""
+        with self._lock:
+            t_s = self._t_ns / 1e9
+            people = self.scenario.people_at(t_s) if self.scenario else ()
+            gain = self.camera.gain * (self.scenario.gain_at(t_s) if self.scenario else 1.0)
+            noise = self.camera.noise_sigma
+            blur = self.camera.blur_sigma_px
+            if self.scenario is not None:
+                noise = self.scenario.noise_sigma if self.scenario.noise_sigma is not None \
+                    else noise
+                blur = self.scenario.blur_sigma_px if self.scenario.blur_sigma_px is not None \
+                    else blur
+            image = self.renderer.donut(self._pose, people=people, gain=gain, noise_sigma=noise,
+                                        blur_sigma_px=blur, rng=self._camera_rng)
+            self._frame_seq += 1
+            return Frame(image=image, stamp_ns=self.now_ns(), seq=self._frame_seq)
