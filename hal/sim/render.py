@@ -38,6 +38,13 @@ class Person:
     colour: tuple[int, int, int] = (70, 60, 140)
 
 
+def _pack(bgr: np.ndarray) -> np.ndarray:
+    """(h, w, 3) uint8 -> (h, w) uint32 holding B, G, R, 0 in memory order."""
+    four = np.zeros((*bgr.shape[:2], 4), np.uint8)
+    four[..., :3] = bgr
+    return four.view(np.uint32)[..., 0]
+
+
 class Renderer:
     def __init__(self, world: World, mirror: MirrorSettings, panorama: PanoramaSettings,
                  image_size: tuple[int, int]) -> None:
@@ -47,7 +54,7 @@ class Renderer:
         self.image_size = image_size
         self.model = MirrorModel(mirror, panorama)
         self._build_geometry()
-        self._carpet = textures.carpet(world.floor_colour, world.texture_seed)
+        self._carpet = _pack(textures.carpet(world.floor_colour, world.texture_seed))
         self._build_donut_map()
 
     # ---------------------------------------------------------------- geometry
@@ -82,7 +89,9 @@ class Renderer:
                 offset.append(col + along * PX)
                 along += sl
             col += strip_w
-        self._atlas = np.concatenate(strips, axis=1)
+        atlas = np.concatenate(strips, axis=1)
+        # Packed as one uint32 per pixel (B, G, R, 0): one gather per pixel instead of three.
+        self._atlas = _pack(atlas)
         self._atlas_rows = rows
         self._p0 = np.asarray(p0, float)
         self._d = np.asarray(d, float)
@@ -131,70 +140,77 @@ class Renderer:
         cols = (self._offset[seg] + s * self._len[seg] * PX).astype(np.intp)
         rows = np.clip(((self.world.wall_height_m - z) * PX).astype(np.intp), 0,
                        self._atlas_rows - 1)
-        return self._atlas[rows, np.clip(cols, 0, self._atlas.shape[1] - 1)]
+        return self._atlas[rows, np.clip(cols, 0, self._atlas.shape[1] - 1)]  # packed uint32
 
     def _render(self, pose: tuple[float, float, float], elevations: np.ndarray,
                 bearings: np.ndarray, people: Sequence[Person], gain: float
                 ) -> tuple[np.ndarray, np.ndarray]:
         """(rows, cols, 3) BGR view and its floor mask for the given elevation rows and
-        bearing columns."""
+        bearing columns. Work is done per visible surface on flat index arrays only."""
         x, y, yaw = pose
         h = self.pano.camera_height_m
         wall_h = self.world.wall_height_m
         angles = yaw + bearings
+        cos_a, sin_a = np.cos(angles), np.sin(angles)
         hit = self._cast(x, y, angles, people)
         R, C = len(elevations), len(bearings)
-        tan_phi = np.tan(elevations)[:, None]
-        img = np.empty((R, C, 3), np.uint8)
-        # Ceiling: light panels on a 0.6 m grid.
-        with np.errstate(divide="ignore", invalid="ignore"):
-            d_ceil = np.where(tan_phi > 0, (wall_h - h) / tan_phi, np.inf)
-            d_floor = np.where(tan_phi < 0, h / -tan_phi, np.inf)
-        d_ceil = np.where(np.isfinite(d_ceil), d_ceil, 0.0)
-        cx = x + d_ceil * np.cos(angles)[None, :]
-        cy = y + d_ceil * np.sin(angles)[None, :]
-        grid = (np.abs(np.mod(cx, 0.6) - 0.3) > 0.28) | (np.abs(np.mod(cy, 0.6) - 0.3) > 0.28)
-        ceiling = np.where(grid[..., None], np.array(self.world.ceiling_colour) * 0.8,
-                           np.array(self.world.ceiling_colour))
-        img[:] = np.nan_to_num(ceiling).astype(np.uint8)
-        # Floor: tiled carpet texture in world coordinates.
-        z_full = h + hit["t_full"][None, :] * tan_phi
+        tan_phi = np.tan(elevations).astype(np.float32)[:, None]
+        # Height where each pixel's ray meets the nearest full wall: z = h + t tan(phi).
+        t_full = np.minimum(hit["t_full"], 1e6).astype(np.float32)[None, :]
+        z_full = h + t_full * tan_phi
+        packed = np.empty((R, C), np.uint32)
+        img = packed.view(np.uint8).reshape(R, C, 4)
         floor = z_full < 0
+        ceiling = z_full > wall_h
+        wall = ~(floor | ceiling)
+        # Ceiling: light panels on a 0.6 m grid, seen at d = (H_wall - h) / tan(phi).
+        cr, cc = np.nonzero(ceiling)
+        d = (wall_h - h) / tan_phi[cr, 0]
+        gx = np.mod(x + d * cos_a[cc], 0.6)
+        gy = np.mod(y + d * sin_a[cc], 0.6)
+        seam = (np.abs(gx - 0.3) > 0.28) | (np.abs(gy - 0.3) > 0.28)
+        ceil_colour = np.array(self.world.ceiling_colour, np.uint8)
+        img[cr, cc, :3] = np.where(seam[:, None], (ceil_colour * 0.8).astype(np.uint8),
+                                   ceil_colour)
+        # Floor: tiled carpet texture in world coordinates, seen at d = h / -tan(phi).
         fr, fc = np.nonzero(floor)
-        fx = x + d_floor[fr, 0] * np.cos(angles[fc])
-        fy = y + d_floor[fr, 0] * np.sin(angles[fc])
+        d = h / -tan_phi[fr, 0]
         n = self._carpet.shape[0]
-        img[fr, fc] = self._carpet[(fy * PX).astype(np.intp) % n, (fx * PX).astype(np.intp) % n]
+        packed[fr, fc] = self._carpet[((y + d * sin_a[fc]) * PX).astype(np.intp) % n,
+                                   ((x + d * cos_a[fc]) * PX).astype(np.intp) % n]
         # Full-height walls.
-        wall = (z_full >= 0) & (z_full <= wall_h)
         wr, wc = np.nonzero(wall)
-        img[wr, wc] = self._wall_pixels(hit["i_full"][wc], hit["s_full"][wc], z_full[wr, wc])
+        packed[wr, wc] = self._wall_pixels(hit["i_full"][wc], hit["s_full"][wc], z_full[wr, wc])
         # Low obstacles in front of the wall.
         if "t_low" in hit:
-            t_low = hit["t_low"][None, :]
-            z_low = h + t_low * tan_phi
-            low = (t_low < hit["t_full"][None, :]) & (z_low >= 0) & (
-                z_low <= self._height[hit["i_low"]][None, :])
-            lr, lc = np.nonzero(low)
-            img[lr, lc] = self._wall_pixels(hit["i_low"][lc], hit["s_low"][lc], z_low[lr, lc])
-            floor &= ~low
+            in_front = np.nonzero(hit["t_low"] < hit["t_full"])[0]
+            if len(in_front):
+                t_low = hit["t_low"][in_front].astype(np.float32)[None, :]
+                z_low = h + t_low * tan_phi
+                top = self._height[hit["i_low"][in_front]][None, :]
+                lr, lk = np.nonzero((z_low >= 0) & (z_low <= top))
+                lc = in_front[lk]
+                packed[lr, lc] = self._wall_pixels(hit["i_low"][lc], hit["s_low"][lc],
+                                                z_low[lr, lk])
+                floor[lr, lc] = False
         # People in front of everything else.
         if people:
             nearest = np.minimum(hit["t_full"], hit.get("t_low", hit["t_full"]))
-            t_p = hit["t_person"][None, :]
-            z_p = h + t_p * tan_phi
-            heights = np.array([p.height for p in people])[hit["i_person"]][None, :]
-            person = (t_p < nearest[None, :]) & (z_p >= 0) & (z_p <= heights)
-            pr, pc = np.nonzero(person)
-            colours = np.array([p.colour for p in people], float)[hit["i_person"][pc]]
-            head = z_p[pr, pc] > heights[0, pc] - 0.25
-            colours[head] = (90, 120, 170)
-            img[pr, pc] = np.clip(colours * (0.8 + 0.2 * np.cos(angles[pc] * 7.0))[:, None],
-                                  0, 255).astype(np.uint8)
-            floor &= ~person
+            cols = np.nonzero(hit["t_person"] < nearest)[0]
+            if len(cols):
+                t_p = hit["t_person"][cols].astype(np.float32)[None, :]
+                z_p = h + t_p * tan_phi
+                heights = np.array([p.height for p in people])[hit["i_person"][cols]]
+                pr, pk = np.nonzero((z_p >= 0) & (z_p <= heights[None, :]))
+                pc = cols[pk]
+                colours = np.array([p.colour for p in people], float)[hit["i_person"][pc]]
+                colours[z_p[pr, pk] > heights[pk] - 0.25] = (90, 120, 170)  # head
+                shade = 0.8 + 0.2 * np.cos(angles[pc] * 7.0)
+                img[pr, pc, :3] = np.clip(colours * shade[:, None], 0, 255).astype(np.uint8)
+                floor[pr, pc] = False
         if gain != 1.0:
             img = np.asarray(cv2.convertScaleAbs(img, alpha=gain))
-        return img, floor
+        return img, floor  # (R, C, 4): B, G, R and an unused fourth byte
 
     # ---------------------------------------------------------------- panorama
     def _pano_grid(self, rows: int, cols: int, top: float, bottom: float
@@ -210,7 +226,8 @@ class Renderer:
         top, bottom = self.model.top, self.model.bottom
         elev, bearings = self._pano_grid(H * SUPERSAMPLE, W * SUPERSAMPLE, top, bottom)
         img, _ = self._render(pose, elev, bearings, people, gain)
-        return cv2.resize(img, (W, H), interpolation=cv2.INTER_AREA)
+        return np.asarray(cv2.cvtColor(cv2.resize(img, (W, H), interpolation=cv2.INTER_AREA),
+                                       cv2.COLOR_BGRA2BGR))
 
     def floor_mask(self, pose: tuple[float, float, float], *,
                    people: Sequence[Person] = ()) -> np.ndarray:
@@ -226,7 +243,8 @@ class Renderer:
         m = self.mirror
         w, h = self.image_size
         self._band_cols = self.pano.width * SUPERSAMPLE
-        self._band_rows = self.pano.height * SUPERSAMPLE
+        # One band row per pixel of radial extent: the raw image's own radial resolution.
+        self._band_rows = int(math.ceil(m.r_outer_px - m.r_inner_px))
         u, v = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
         du, dv = u - m.center_x_px, m.center_y_px - v
         r = np.hypot(du, dv)
@@ -249,11 +267,33 @@ class Renderer:
             rows = np.linspace(-0.5, self.pano.height - 0.5, 2000)
             radii = self.model.radius_of_row(rows)
             order = np.argsort(radii)
-            row = np.interp(r, radii[order], rows[order]) * SUPERSAMPLE
-        self._inside = r < m.r_inner_px
-        self._outside = r > m.r_outer_px
+            row = (np.interp(r, radii[order], rows[order]) + 0.5) * (
+                self._band_rows / self.pano.height) - 0.5
+        # Two extra band rows hold the camera body (inside r_inner) and black (outside
+        # r_outer), so one remap draws the whole raw image, edges blended by interpolation.
+        row = np.where(r < m.r_inner_px, self._band_rows + 0.5, row)
+        row = np.where(r > m.r_outer_px, self._band_rows + 1.5, row)
+        self._noise_bank: np.ndarray | None = None
         self._map_x = np.asarray(col, np.float32)
         self._map_y = np.asarray(row, np.float32)
+
+    NOISE_FIXED_POINT = 16.0
+
+    def _add_noise(self, raw: np.ndarray, sigma: float, rng: np.random.Generator
+                   ) -> np.ndarray:
+        """Gaussian sensor noise, independent per pixel and channel. Drawing ~1M normals
+        per frame would halve the frame rate, so a bank of two frames' worth of N(0, 1)
+        samples is drawn once from ``rng`` and each frame takes a window at a random offset
+        (also from ``rng``): every pixel still gets N(0, sigma²) noise, and consecutive
+        frames get different noise."""
+        n = raw.size
+        if self._noise_bank is None or self._noise_bank.size < 2 * n:
+            bank = rng.standard_normal(2 * n, dtype=np.float32) * self.NOISE_FIXED_POINT
+            self._noise_bank = np.round(bank).astype(np.int16)
+        offset = int(rng.integers(0, n))
+        noise = self._noise_bank[offset: offset + n].reshape(raw.shape)
+        return np.asarray(cv2.addWeighted(raw, 1.0, noise, sigma / self.NOISE_FIXED_POINT, 0.0,
+                                          dtype=cv2.CV_8U))
 
     def donut(self, pose: tuple[float, float, float], *, people: Sequence[Person] = (),
               gain: float = 1.0, noise_sigma: float = 0.0, blur_sigma_px: float = 0.0,
@@ -262,15 +302,15 @@ class Renderer:
         elev, bearings = self._pano_grid(self._band_rows, self._band_cols, self._band_top,
                                          self._band_bottom)
         band, _ = self._render(pose, elev, bearings, people, gain)
-        raw = cv2.remap(band, self._map_x, self._map_y, interpolation=cv2.INTER_LINEAR,
-                        borderMode=cv2.BORDER_WRAP)
-        raw[self._inside] = CAMERA_BODY_BGR
-        raw[self._outside] = 0
+        band = np.concatenate([band, np.zeros((3, band.shape[1], 4), np.uint8)])
+        band[-3, :, :3] = CAMERA_BODY_BGR
+        raw = cv2.cvtColor(cv2.remap(band, self._map_x, self._map_y,
+                                     interpolation=cv2.INTER_LINEAR,
+                                     borderMode=cv2.BORDER_WRAP), cv2.COLOR_BGRA2BGR)
         if blur_sigma_px > 0:
             raw = cv2.GaussianBlur(raw, (0, 0), blur_sigma_px)
         if noise_sigma > 0:
             if rng is None:
                 raise ValueError("noise needs an np.random.Generator (rng)")
-            noise = np.asarray(rng.normal(0.0, noise_sigma, raw.shape), np.float32)
-            raw = np.clip(raw.astype(np.float32) + noise, 0, 255).astype(np.uint8)
+            raw = self._add_noise(raw, noise_sigma, rng)
         return raw
