@@ -44,6 +44,13 @@ class _Move:
     w: float = 0.0
 
 
+def _braking_speed(remaining: float, decel: float, dt: float) -> float:
+    """The highest speed from which steps of ``dt`` slowing by ``decel * dt`` each cover
+    ``remaining`` exactly: v = a dt (sqrt(1/4 + 2 d / (a dt²)) − 1/2)."""
+    step = decel * dt
+    return step * (math.sqrt(0.25 + 2.0 * remaining / (step * dt)) - 0.5)
+
+
 class SimRobot:
     def __init__(self, renderer: Renderer, camera: SimCameraSettings, base: SimBaseSettings,
                  *, seed: int, realtime: bool, start_pose: tuple[float, float, float],
@@ -171,11 +178,11 @@ class SimRobot:
         length = math.hypot(gx - sx, gy - sy)
         turn = float(wrap_angle(gyaw - syaw))
         rem = length - m.progress
-        m.v = min(m.speed, m.v + b.max_accel_m_s2 * dt, math.sqrt(2 * b.max_accel_m_s2 * rem))
+        m.v = min(m.speed, m.v + b.max_accel_m_s2 * dt, _braking_speed(rem, b.max_accel_m_s2, dt))
         adv = min(rem, m.v * dt)
         rem_turn = abs(turn) - m.turned
         m.w = min(m.yaw_rate, m.w + b.max_yaw_accel_rad_s2 * dt,
-                  math.sqrt(2 * b.max_yaw_accel_rad_s2 * max(rem_turn, 0.0)))
+                  _braking_speed(max(rem_turn, 0.0), b.max_yaw_accel_rad_s2, dt))
         adv_turn = min(rem_turn, m.w * dt)
         if rem - adv < 1e-9 and m.v * dt >= rem:
             adv = rem

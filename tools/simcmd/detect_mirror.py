@@ -1,0 +1,33 @@
+"""``placecell-sim detect-mirror IMAGE [--json]``: find the donut in a raw camera image."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+
+import cv2
+
+from daemon.errors import PlacecellError
+from daemon.vision.detect_mirror import detect_mirror
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("image", help="a raw mirror-camera image (PNG, JPEG, ...)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    image = cv2.imread(args.image, cv2.IMREAD_COLOR)
+    if image is None:
+        raise PlacecellError(f"cannot read {args.image} as an image")
+    g = detect_mirror(image)
+    if args.json:
+        print(json.dumps(dataclasses.asdict(g)))
+    else:
+        print(f"# {args.image}: {image.shape[1]} x {image.shape[0]} px; rim fit RMS "
+              f"{g.outer_residual_px} px, inner fit RMS {g.inner_residual_px} px")
+        print("[mirror]")
+        for key in ("center_x_px", "center_y_px", "r_inner_px", "r_outer_px"):
+            print(f"{key} = {getattr(g, key)}")
+    return 0
