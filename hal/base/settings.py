@@ -51,11 +51,17 @@ class Xr4000CanSettings:
     bitrate: int = setting(500_000, ge=10_000, le=1_000_000)
     odometry_position_id: int = setting(0x181, ge=0, le=0x7FF)
     odometry_heading_id: int = setting(0x281, ge=0, le=0x7FF)
+    answer_id: int = setting(0x182, ge=0, le=0x7FF, doc="the controller's command answers")
     move_id: int = setting(0x201, ge=0, le=0x7FF)
     velocity_id: int = setting(0x202, ge=0, le=0x7FF)
     stop_id: int = setting(0x200, ge=0, le=0x7FF)
     command_timeout_s: float = setting(0.5, gt=0.0, le=10.0)
     silence_timeout_s: float = setting(0.5, gt=0.0, le=10.0)
+
+    def __post_init__(self) -> None:
+        if self.interface == "udp_multicast":
+            raise ValueError("base.xr4000_can.interface 'udp_multicast' is not allowed: its "
+                             "traffic leaves the machine")
 
 
 @dataclass(frozen=True)

@@ -90,6 +90,10 @@ class SimRobot:
     def _stamp(self, t_ns: int) -> int:
         return self._mono0 + t_ns if self.realtime else t_ns
 
+    def elapsed_ns(self, stamp_ns: int) -> int:
+        """Simulated time since the start of a stamp (the controller's own clock)."""
+        return stamp_ns - self._mono0 if self.realtime else stamp_ns
+
     def wall_time_ns(self) -> int:
         """Simulated time that corresponds to now (realtime mode)."""
         return time.monotonic_ns() - self._mono0

@@ -1,0 +1,1 @@
+"""The XR4000 base-controller emulator (the controller side of SPEC §12)."""
