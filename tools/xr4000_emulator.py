@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
             scenario = load_scenario(args.scenario) if args.scenario else None
             config = dataclasses.replace(config, sim=dataclasses.replace(config.sim,
                                                                          realtime=True))
-            source = SimSource(build_sim_robot(config, scenario))
+            source = SimSource(build_sim_robot(config, scenario, camera=False))
         if args.serial:
             side: SerialSide | CanSide = SerialSide(args.serial)
         else:

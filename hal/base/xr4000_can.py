@@ -90,6 +90,7 @@ class Xr4000CanBase(Xr4000Link):
             msg = bus.recv(timeout=0.05)
             while msg is not None:
                 out += self._decoder.feed(msg.arbitration_id, bytes(msg.data),
+                                          timestamp=msg.timestamp,
                                           is_error=msg.is_error_frame,
                                           is_remote=msg.is_remote_frame)
                 msg = bus.recv(timeout=0.0)

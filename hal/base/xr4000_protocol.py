@@ -278,19 +278,24 @@ def can_answer(counter: int, command: int, result: int) -> bytes:
 
 
 class CanFrameDecoder:
-    """CAN frames in, odometry/status/answers out. A position frame (0x181) is paired with
-    the next heading frame (0x281) only: a heading without a fresh position, or a position
-    overtaken by another, is counted (``unpaired``) and dropped. Wrong lengths
+    """CAN frames in, odometry/status/answers out.
+
+    The position frame (0x181) carries no sequence number, so it is paired with the heading
+    frame (0x281) that follows it within ``max_pair_gap_s`` (the controller sends both
+    back to back; samples are a period apart). A heading without a fresh position, or a
+    position overtaken by another or gone stale, is counted (``unpaired``) and dropped, so
+    one sample's position is never joined to another's heading. Wrong lengths
     (``bad_length``), out-of-range values (``out_of_range``), error frames (``error_frame``),
     remote frames and unknown ids (``unknown``) are counted too."""
 
-    def __init__(self, ids: CanIds | None = None) -> None:
+    def __init__(self, ids: CanIds | None = None, max_pair_gap_s: float = 0.008) -> None:
         self.ids = ids or CanIds()
-        self._position: tuple[int, int] | None = None
+        self.max_pair_gap_s = max_pair_gap_s
+        self._position: tuple[int, int, float] | None = None
         self.errors: Counter[str] = Counter()
 
-    def feed(self, arbitration_id: int, data: bytes, *, is_error: bool = False,
-             is_remote: bool = False) -> list[Message | CanAnswer]:
+    def feed(self, arbitration_id: int, data: bytes, *, timestamp: float = 0.0,
+             is_error: bool = False, is_remote: bool = False) -> list[Message | CanAnswer]:
         if is_error:
             self.errors["error_frame"] += 1
             return []
@@ -309,7 +314,7 @@ class CanFrameDecoder:
                 return []
             if self._position is not None:
                 self.errors["unpaired"] += 1
-            self._position = (x, y)
+            self._position = (x, y, timestamp)
             return []
         if arbitration_id == ids.odometry_heading:
             if len(data) != 8:
@@ -321,6 +326,9 @@ class CanFrameDecoder:
                 self.errors["out_of_range"] += 1
                 return []
             out: list[Message | CanAnswer] = [StaMsg(seq, flags)]
+            if position is not None and timestamp - position[2] > self.max_pair_gap_s:
+                self.errors["unpaired"] += 1  # a stale position: another sample's
+                position = None
             if position is None:
                 self.errors["unpaired"] += 1
             else:

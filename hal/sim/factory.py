@@ -11,18 +11,21 @@ from hal.sim.scenario import Scenario, load_scenario
 from hal.sim.world import load_world
 
 
-def build_sim_robot(config: Any, scenario: Scenario | None = None) -> SimRobot:
+def build_sim_robot(config: Any, scenario: Scenario | None = None, *,
+                    camera: bool = True) -> SimRobot:
     """A SimRobot from a PlacecellConfig; the scenario (config.sim.scenario, or the one
-    given) may override the world, start pose, frame rate, noise and drift."""
+    given) may override the world, start pose, frame rate, noise and drift. Without
+    ``camera`` no renderer is built (a base alone, e.g. for the XR4000 emulator)."""
     sim = config.sim
     if scenario is None and sim.scenario:
         scenario = load_scenario(sim.scenario)
     world = load_world(scenario.world if scenario else sim.world)
-    camera = config.camera.sim
+    camera_settings = config.camera.sim
     base = config.base.sim
     if scenario is not None:
         if scenario.frame_rate_hz is not None:
-            camera = dataclasses.replace(camera, rate_hz=scenario.frame_rate_hz)
+            camera_settings = dataclasses.replace(camera_settings,
+                                                  rate_hz=scenario.frame_rate_hz)
         if scenario.drift:
             base = dataclasses.replace(base, **scenario.drift)
     start = tuple(sim.start_pose)
@@ -31,8 +34,9 @@ def build_sim_robot(config: Any, scenario: Scenario | None = None) -> SimRobot:
     elif not sim.scenario and tuple(sim.start_pose) == (0.0, 0.0, 0.0):
         start = world.start_pose  # the world's own start when none is configured
     renderer = Renderer(world, config.mirror, config.panorama,
-                        (camera.image_width, camera.image_height))
-    return SimRobot(renderer, camera, base, seed=sim.seed, realtime=sim.realtime,
+                        (camera_settings.image_width, camera_settings.image_height)
+                        ) if camera else None
+    return SimRobot(renderer, camera_settings, base, seed=sim.seed, realtime=sim.realtime,
                     start_pose=(float(start[0]), float(start[1]), float(start[2])),
                     scenario=scenario)
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from daemon.errors import CommandRejectedError
+from daemon.errors import CommandRejectedError, DeviceInitError
 from daemon.vision.panorama import wrap_angle
 from hal.base.base import BaseStatus, Odometry
 from hal.base.settings import SimBaseSettings
@@ -52,7 +52,7 @@ def _braking_speed(remaining: float, decel: float, dt: float) -> float:
 
 
 class SimRobot:
-    def __init__(self, renderer: Renderer, camera: SimCameraSettings, base: SimBaseSettings,
+    def __init__(self, renderer: Renderer | None, camera: SimCameraSettings, base: SimBaseSettings,
                  *, seed: int, realtime: bool, start_pose: tuple[float, float, float],
                  scenario: Scenario | None = None) -> None:
         self.renderer = renderer
@@ -311,6 +311,8 @@ class SimRobot:
 
     def render_frame(self) -> Frame:
         """The raw donut at the current simulated time."""
+        if self.renderer is None:
+            raise DeviceInitError("this simulated robot was built without a camera")
         with self._lock:
             t_s = self._t_ns / 1e9
             people = self.scenario.people_at(t_s) if self.scenario else ()

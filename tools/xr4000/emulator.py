@@ -52,15 +52,16 @@ class SimSource:
         self.robot = robot
         self.can_move = robot.base.can_move
 
-    def poll(self) -> list[tuple[Sample, tuple[float, float, float]]]:
-        """New samples (and the true pose at each, for the truth log)."""
+    def poll(self) -> list[tuple[Sample, dict[str, Any]]]:
+        """New samples, each with what the truth log records: the true pose and the
+        odometry before wire quantisation."""
         self.robot.advance_to(self.robot.wall_time_ns())
         out = []
         for s in self.robot.odometry_samples():
             t_ms = self.robot.elapsed_ns(s.stamp_ns) // 1_000_000  # controller time
             out.append(((s.seq, t_ms, round(s.x * 1000), round(s.y * 1000),
                          round(math.remainder(s.yaw, 2 * math.pi) * 1000)),
-                        self.robot.true_pose()))
+                        {"true": self.robot.true_pose(), "odo": (s.x, s.y, s.yaw)}))
         return out
 
     def flags(self) -> int:
@@ -90,14 +91,14 @@ class RecordingSource:
         self._t0_wall = time.monotonic_ns()
         self.finished = self._pending is None
 
-    def poll(self) -> list[tuple[Sample, tuple[float, float, float]]]:
+    def poll(self) -> list[tuple[Sample, dict[str, Any]]]:
         now = time.monotonic_ns() - self._t0_wall + self._t0_log
         out = []
         while self._pending is not None and self._pending.log_time_ns <= now:
             b = self._pending.body
             t_ms = (int(b["stamp_ns"]) - self._t0_log) // 1_000_000
             out.append(((int(b["seq"]), t_ms, round(b["x"] * 1000), round(b["y"] * 1000),
-                         round(b["yaw"] * 1000)), (math.nan, math.nan, math.nan)))
+                         round(b["yaw"] * 1000)), {"odo": (b["x"], b["y"], b["yaw"])}))
             self._pending = next(self._messages, None)
         self.finished = self._pending is None
         return out
@@ -147,8 +148,9 @@ class Emulator:
         for sample, truth in self.source.poll():
             self._send_odometry(sample, t)
             if self._truth is not None:
-                self._truth.write(json.dumps({"t_ms": sample[1], "x": truth[0], "y": truth[1],
-                                              "yaw": truth[2]}) + "\n")
+                self._truth.write(json.dumps({"seq": sample[0], "t_ms": sample[1],
+                                              "wire": sample[2:], **truth}) + "\n")
+                self._truth.flush()
         flags = self.source.flags()
         if isinstance(self.side, SerialSide) and (
                 flags != self._last_flags or time.monotonic() - self._last_status >= 1.0):
