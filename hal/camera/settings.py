@@ -45,7 +45,7 @@ class ReplayCameraSettings:
 @dataclass(frozen=True)
 class CameraSettings:
     backend: str = setting("sim", doc="sim | replay | v4l2 | libcamera")
-    read_timeout_s: float = setting(1.0, gt=0.0, le=60.0, doc="a read longer than this is a stall")
+    read_timeout_s: float = setting(0.5, gt=0.0, le=60.0, doc="a read longer than this is a stall")
     sim: SimCameraSettings = setting(default_factory=SimCameraSettings)
     v4l2: V4L2Settings = setting(default_factory=V4L2Settings)
     libcamera: LibcameraSettings = setting(default_factory=LibcameraSettings)

@@ -296,6 +296,10 @@ class SimRobot:
         lock-step advances the simulation to it at once."""
         with self._lock:
             due = max(self._next_frame_ns, self._t_ns)
+        if self.scenario is not None and self.realtime:
+            # A stalled camera (scenario fault): frames due in the stall never come.
+            while self.scenario.camera_stalled(due / 1e9):
+                due += self._frame_ns
         if self.realtime:
             wait = (due - self.wall_time_ns()) / 1e9
             if wait > timeout:

@@ -72,6 +72,7 @@ class Scenario:
     walkers: tuple[Walker, ...] = ()
     kidnaps: tuple[tuple[float, Pose], ...] = ()
     drift: dict[str, float] = field(default_factory=dict)
+    camera_stalls: tuple[tuple[float, float], ...] = ()  # (start_s, duration_s): no frames
 
     # ------------------------------------------------------------ playback
     def gain_at(self, t: float) -> float:
@@ -93,6 +94,9 @@ class Scenario:
             if p is not None:
                 out.append(Person(p[0], p[1], w.radius, w.height))
         return tuple(out)
+
+    def camera_stalled(self, t: float) -> bool:
+        return any(start <= t < start + dur for start, dur in self.camera_stalls)
 
     def kidnap_due(self, t: float, done: int) -> Pose | None:
         if done < len(self.kidnaps) and t >= self.kidnaps[done][0]:
@@ -139,7 +143,7 @@ class Scenario:
 
 # ---------------------------------------------------------------- loading
 _TOP = {"name", "world", "start_pose", "duration_s", "frame_rate_hz", "camera", "trajectory",
-        "illumination", "people", "kidnap", "drift"}
+        "illumination", "people", "kidnap", "drift", "camera_stall"}
 _TRAJ = {"kind", "waypoints", "speed", "laps", "loop", "extent_m", "face_travel"}
 _DRIFT = {"scale_error", "heading_bias_rad_per_m", "random_walk_m_per_sqrt_m",
           "random_walk_rad_per_sqrt_m"}
@@ -232,6 +236,11 @@ def scenario_from_dict(data: dict[str, Any], base_dir: Path = Path(".")) -> Scen
         k = _keys(k, {"t_s", "pose"}, f"kidnap[{i}]")
         kidnaps.append((_num(k.get("t_s"), f"kidnap[{i}].t_s", 0.0),
                         _pose(k.get("pose"), f"kidnap[{i}].pose")))
+    stalls = []
+    for i, st in enumerate(data.get("camera_stall", [])):
+        st = _keys(st, {"t_s", "duration_s"}, f"camera_stall[{i}]")
+        stalls.append((_num(st.get("t_s"), f"camera_stall[{i}].t_s", 0.0),
+                       _num(st.get("duration_s"), f"camera_stall[{i}].duration_s", 0.0)))
     drift = _keys(data.get("drift", {}), _DRIFT, "drift")
     return Scenario(
         name=str(data.get("name", "scenario")), world=world, start_pose=start,
@@ -246,7 +255,8 @@ def scenario_from_dict(data: dict[str, Any], base_dir: Path = Path(".")) -> Scen
         if "blur_sigma_px" in cam else None,
         gain_schedule=gains, walkers=tuple(walkers),
         kidnaps=tuple(sorted(kidnaps, key=lambda k: k[0])),
-        drift={k: _num(v, f"drift.{k}") for k, v in drift.items()})
+        drift={k: _num(v, f"drift.{k}") for k, v in drift.items()},
+        camera_stalls=tuple(stalls))
 
 
 def _trajectory(traj: dict[str, Any], start: Pose | None) -> list[Waypoint]:
