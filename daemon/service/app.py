@@ -48,6 +48,7 @@ class Daemon:
         self._session: zenoh.Session | None = None
         self._publishers: dict[str, Any] = {}
         self._belief: Belief | None = None
+        self._belief_received_ns = 0
         self._status_lock = threading.Lock()
         self._last_status: bytes = b""
         self.hal = HalContext(config)
@@ -121,6 +122,7 @@ class Daemon:
 
     def _on_belief(self, belief: Belief) -> None:
         self._belief = belief
+        self._belief_received_ns = time.monotonic_ns()
         self.publish("belief", zenoh_link.encode("placecell.belief", _belief_body(belief)))
         if self.recorder is not None:
             self.recorder.write_json("belief", belief.stamp_ns, _belief_body(belief))
@@ -141,8 +143,7 @@ class Daemon:
                 "odometry_hz": round(health["base"].rate.rate_hz(now), 2),
                 "processed_hz": round(health["processing"].rate.rate_hz(now), 2),
             },
-            "belief": None if belief is None else {"state": belief.state,
-                                                   "reason": belief.reason},
+            "belief": self._belief_summary(belief, now),
             "map": {"path": self.config.map.path, "places": self.map.place_count(),
                     "transitions": self.map.transition_count()},
             "versions": {
@@ -153,6 +154,26 @@ class Daemon:
                 "numpy": np.__version__,
             },
         }
+
+    def _belief_summary(self, belief: Belief | None, now_ns: int) -> dict[str, Any]:
+        """The belief as status reports it: honest about missing sensors (SPEC §11)."""
+        health = self.supervisor.health
+        stale_ns = self.config.service.stale_after_s * 1e9
+        frames_ok = (health["camera"].state == "running" and belief is not None
+                     and now_ns - self._belief_received_ns < stale_ns)
+        odometry_ok = health["base"].state == "running"
+        state = "uninitialised" if belief is None else belief.state
+        reasons = [] if belief is None else [belief.reason]
+        if not frames_ok:
+            reasons.insert(0, "no camera frames"
+                           + (f" ({health['camera'].last_error})"
+                              if health["camera"].last_error else ""))
+        if not odometry_ok:
+            reasons.insert(0, "no odometry: motion unknown"
+                           + (f" ({health['base'].last_error})"
+                              if health["base"].last_error else ""))
+        return {"state": state, "reason": "; ".join(reasons), "frames_ok": frames_ok,
+                "odometry_ok": odometry_ok}
 
     def status_payload(self) -> bytes:
         return zenoh_link.encode("placecell.status", self.status())

@@ -92,15 +92,18 @@ class Supervisor:
                 health.state = "starting"
                 health.beat()
                 component.setup()
-                health.state = "running"
-                if health.last_error is not None:
-                    log.info("%s recovered after %d restart(s)", component.name, health.restarts)
-                    self._on_event("device_recovered", component=component.name,
-                                   restarts=health.restarts)
-                backoff = self._backoff_initial_s
                 while not self._stop.is_set():
                     component.step()
                     health.beat()
+                    if health.state != "running":
+                        # Running means delivering: the first step after set-up worked.
+                        health.state = "running"
+                        backoff = self._backoff_initial_s
+                        if health.last_error is not None:
+                            log.info("%s recovered after %d restart(s)", component.name,
+                                     health.restarts)
+                            self._on_event("device_recovered", component=component.name,
+                                           restarts=health.restarts)
             except Exception as e:  # noqa: BLE001 - the supervisor's whole job
                 reason = f"{type(e).__name__}: {e}"
                 log.error("%s failed: %s; restarting in %.2f s", component.name, reason, backoff)
