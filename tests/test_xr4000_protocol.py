@@ -53,6 +53,7 @@ def test_round_trip_in_any_chunking(msg: object) -> None:
     (b"$" + b"1" * 200 + b"\r\n", "too_long"),
     (b"$ODO,1,20,0,0,0\r\n", "bad_format"),
     (b"$ODO,1,20,0,0,0*Z1\r\n", "bad_format"),
+    (b"$ODO,1,20,0,0,0*6b\r\n", "bad_format"),  # the checksum is upper-case hex
 ])
 def test_malformed_lines_are_counted(data: bytes, reason: str) -> None:
     parser = SerialLineParser()

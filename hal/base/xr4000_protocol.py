@@ -209,11 +209,10 @@ class SerialLineParser:
             self.errors["bad_format"] += 1
             return None
         body, given = line[:star], line[star + 1:]
-        try:
-            expected = int(given.decode("ascii"), 16)
-        except (UnicodeDecodeError, ValueError):
+        if any(c not in b"0123456789ABCDEF" for c in given):  # two upper-case hex digits
             self.errors["bad_format"] += 1
             return None
+        expected = int(given, 16)
         if checksum(body) != expected:
             self.errors["bad_checksum"] += 1
             return None
