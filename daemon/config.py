@@ -8,13 +8,12 @@ is opened.
 from __future__ import annotations
 
 import re
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
 from daemon.errors import ConfigError
-from daemon.settings import as_dict, build, setting
+from daemon.settings import as_dict, build, read_toml, setting
 from daemon.vision.settings import MirrorSettings, PanoramaSettings
 from hal.base.settings import BaseSettings
 from hal.camera.settings import CameraSettings
@@ -99,14 +98,7 @@ def load(path: str | Path | None) -> PlacecellConfig:
     if path is None:
         return from_dict({})
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as e:
-        raise ConfigError(f"cannot read configuration {p}: {e.strerror}") from e
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{p}: not valid TOML: {e}") from e
+    data = read_toml(p, "configuration")
     try:
         return from_dict(data)
     except ConfigError as e:

@@ -20,11 +20,11 @@ from daemon.localisation.localiser import Belief, Localiser
 from daemon.mapping.store import MapStore
 from daemon.service import zenoh_link
 from daemon.service.components import (
-    BaseComponent,
-    CameraComponent,
     LatestFrame,
     OdometryInbox,
     ProcessingComponent,
+    base_component,
+    camera_component,
 )
 from daemon.service.notify import Notifier
 from daemon.service.supervisor import Supervisor, describe
@@ -71,10 +71,10 @@ class Daemon:
             frame_taps.append(self.recorder.write_frame)
             odo_taps.append(self._record_odometry)
         sup = self.supervisor
-        self.camera = CameraComponent(
+        self.camera = camera_component(
             lambda: create_camera(cfg.camera, self.hal), cfg.camera.read_timeout_s, mailbox,
             lambda: sup.health["camera"], frame_taps)
-        self.base = BaseComponent(
+        self.base = base_component(
             lambda: create_base(cfg.base, self.hal), cfg.base.read_timeout_s, inbox.put,
             lambda: sup.health["base"], odo_taps)
         self.processing = ProcessingComponent(

@@ -40,18 +40,19 @@ class LatestFrame:
             return frame
 
 
-class CameraComponent:
-    name = "camera"
+class DeviceComponent:
+    """A device (camera or base) in the supervised loop: opened by ``setup``, read by
+    ``step`` with a timeout, each delivery handed to ``deliver``, closed by ``teardown``."""
 
-    def __init__(self, make_camera: Callable[[], Camera], timeout_s: float,
-                 mailbox: LatestFrame, health: Callable[[], ComponentHealth],
-                 taps: Sequence[Callable[[Frame], None]]) -> None:
-        self._make = make_camera
+    def __init__(self, name: str, make_device: Callable[[], Any], timeout_s: float,
+                 deliver: Callable[[Any, Any], int], health: Callable[[], ComponentHealth]
+                 ) -> None:
+        self.name = name
+        self._make = make_device
         self._timeout_s = timeout_s
-        self._mailbox = mailbox
+        self._deliver = deliver  # (what was read, device) -> how many items (for the rate)
         self._health = health
-        self._taps = taps
-        self.device: Camera | None = None
+        self.device: Any = None
 
     def setup(self) -> None:
         self.device = self._make()
@@ -60,51 +61,39 @@ class CameraComponent:
 
     def step(self) -> None:
         assert self.device is not None  # set by setup(), which the supervisor runs first
-        frame = self.device.read(self._timeout_s)
-        self._health().rate.tick()
-        for tap in self._taps:
+        got = self.device.read(self._timeout_s)
+        self._health().rate.tick(self._deliver(got, self.device))
+        self._health().detail["stats"] = dict(self.device.stats())
+
+    def teardown(self) -> None:
+        if self.device is not None:
+            self.device.close()
+            self.device = None
+
+
+def camera_component(make_camera: Callable[[], Camera], timeout_s: float,
+                     mailbox: LatestFrame, health: Callable[[], ComponentHealth],
+                     taps: Sequence[Callable[[Frame], None]]) -> DeviceComponent:
+    def deliver(frame: Frame, camera: Camera) -> int:
+        for tap in taps:
             tap(frame)
-        self._mailbox.put(frame)
-        self._health().detail["stats"] = dict(self.device.stats())
+        mailbox.put(frame)
+        return 1
 
-    def teardown(self) -> None:
-        if self.device is not None:
-            self.device.close()
-            self.device = None
+    return DeviceComponent("camera", make_camera, timeout_s, deliver, health)
 
 
-class BaseComponent:
-    name = "base"
+def base_component(make_base: Callable[[], Base], timeout_s: float,
+                   sink: Callable[[list[Odometry]], None], health: Callable[[], ComponentHealth],
+                   taps: Sequence[Callable[[list[Odometry], Base], None]]) -> DeviceComponent:
+    def deliver(samples: list[Odometry], base: Base) -> int:
+        for tap in taps:
+            tap(samples, base)
+        sink(samples)
+        health().detail["flags"] = base.status().to_flags()
+        return len(samples)
 
-    def __init__(self, make_base: Callable[[], Base], timeout_s: float,
-                 sink: Callable[[list[Odometry]], None], health: Callable[[], ComponentHealth],
-                 taps: Sequence[Callable[[list[Odometry], Base], None]]) -> None:
-        self._make = make_base
-        self._timeout_s = timeout_s
-        self._sink = sink
-        self._health = health
-        self._taps = taps
-        self.device: Base | None = None
-
-    def setup(self) -> None:
-        self.device = self._make()
-        self.device.open()
-        self._health().detail["device"] = _info(self.device)
-
-    def step(self) -> None:
-        assert self.device is not None  # set by setup(), which the supervisor runs first
-        samples = self.device.read(self._timeout_s)
-        self._health().rate.tick(len(samples))
-        for tap in self._taps:
-            tap(samples, self.device)
-        self._sink(samples)
-        self._health().detail["stats"] = dict(self.device.stats())
-        self._health().detail["flags"] = self.device.status().to_flags()
-
-    def teardown(self) -> None:
-        if self.device is not None:
-            self.device.close()
-            self.device = None
+    return DeviceComponent("base", make_base, timeout_s, deliver, health)
 
 
 class ProcessingComponent:

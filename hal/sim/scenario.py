@@ -8,12 +8,12 @@ along paths, and kidnap events. It is pure data plus the autopilot's control law
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from daemon.errors import ConfigError
+from daemon.settings import read_toml
 from daemon.vision.panorama import wrap_angle
 from hal.sim.render import Person
 
@@ -186,12 +186,7 @@ def _points(v: Any, where: str) -> list[tuple[float, float]]:
 
 def load_scenario(path: str | Path) -> Scenario:
     p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise ConfigError(f"cannot read scenario {p}: {e.strerror}") from e
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"scenario {p}: not valid TOML: {e}") from e
+    data = read_toml(p, "scenario")
     try:
         return scenario_from_dict(data, base_dir=p.parent)
     except ConfigError as e:

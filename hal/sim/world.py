@@ -7,12 +7,12 @@ accepts ``generate:<kind>:<seed>`` for a generated world (``hal/sim/worldgen.py`
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from daemon.errors import ConfigError
+from daemon.settings import read_toml
 from hal.sim.textures import DECORATION_KINDS, WALL_KINDS
 
 Colour = tuple[int, int, int]
@@ -76,12 +76,7 @@ def load_world(spec: str) -> World:
             raise ConfigError(f"world spec {spec!r}: expected generate:<kind>:<seed>")
         return generate(parts[1], int(parts[2]))
     path = Path(spec)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise ConfigError(f"cannot read world {path}: {e.strerror}") from e
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"world {path}: not valid TOML: {e}") from e
+    data = read_toml(path, "world")
     try:
         return world_from_dict(data)
     except ConfigError as e:
