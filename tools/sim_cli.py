@@ -28,11 +28,7 @@ def main(argv: list[str] | None = None) -> int:
     for name, (module_name, help_text) in SUBCOMMANDS.items():
         p = sub.add_parser(name, help=help_text)
         p.set_defaults(_module=module_name)
-        try:
-            importlib.import_module(module_name).add_arguments(p)
-        except ModuleNotFoundError as e:
-            if e.name != module_name:
-                raise
+        importlib.import_module(module_name).add_arguments(p)
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     try:

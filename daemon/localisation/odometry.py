@@ -43,7 +43,8 @@ class OdometryBuffer:
         if i < len(stamps) and stamps[i] == stamp_ns:
             return self._samples[i]
         if i == 0:
-            return None
+            first = self._samples[0]
+            return first if first.stamp_ns - stamp_ns <= max_extrapolation_ns else None
         if i == len(stamps):
             last = self._samples[-1]
             return last if stamp_ns - last.stamp_ns <= max_extrapolation_ns else None

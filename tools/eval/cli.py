@@ -1,4 +1,4 @@
-"""``placecell-eval EXPERIMENT [--world-kind K] [--world-seed N] [--seed N] [--json] [--plots DIR]``
+"""``placecell-eval EXPERIMENT [--world-kind K] [--world-seed N] [--seed N] [--json]``
 
 Each experiment lives in ``tools/eval/<module>.py`` and provides
 ``add_arguments(parser)`` and ``run(args) -> dict`` returning ``{"metrics": {...},
@@ -20,10 +20,6 @@ from daemon.errors import PlacecellError
 # experiment -> (module, default world kind, one-line help)
 EXPERIMENTS: dict[str, tuple[str, str, str]] = {
     "depth": ("tools.eval.depth", "open-room", "TBL depth-estimate error (SPEC §3.3)"),
-    "recognition-range": (
-        "tools.eval.recognition_range", "office", "area where a place's LRP stays up (§3.4)"
-    ),
-    "recognise": ("tools.eval.recognise", "", "LRP of a landmark set in real images"),
 }
 
 
@@ -37,12 +33,7 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--world-seed", type=int, default=1)
         p.add_argument("--seed", type=int, default=1, help="seed of the experiment's randomness")
         p.add_argument("--json", action="store_true", help="print one JSON object")
-        p.add_argument("--plots", metavar="DIR", help="write PNG figures into DIR")
-        try:
-            importlib.import_module(module_name).add_arguments(p)
-        except ModuleNotFoundError as e:
-            if e.name != module_name:
-                raise
+        importlib.import_module(module_name).add_arguments(p)
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING if args.json else logging.INFO,
                         format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)

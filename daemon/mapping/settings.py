@@ -1,0 +1,20 @@
+"""Settings of place learning (Turn Back and Look, SPEC §3.2)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from daemon.settings import setting
+
+
+@dataclass(frozen=True)
+class TblSettings:
+    extent_m: float = setting(0.5, gt=0.0, le=2.0, doc="cross arm: out and back along ±x, ±y")
+    speed_m_s: float = setting(0.2, gt=0.0, le=1.0, doc="speed along the cross")
+    candidates: int = setting(32, ge=4, le=64, doc="statically selected candidates (§4.2)")
+    keep: int = setting(16, ge=1, le=64, doc="landmarks kept by mean NCC (§4.3)")
+    frame_timeout_s: float = setting(2.0, gt=0.0, le=30.0, doc="no frame this long: refuse")
+    move_timeout_s: float = setting(20.0, gt=0.0, le=300.0, doc="one arm may take this long")
+    search_cols: int = setting(12, ge=2, le=64, doc="tracking window half-width (columns)")
+    search_rows: int = setting(6, ge=1, le=32, doc="tracking window half-height (rows)")
+    initial_depth_m: float = setting(2.5, gt=0.0, le=50.0, doc="EKF prior depth (§4.6)")

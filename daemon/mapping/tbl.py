@@ -1,0 +1,140 @@
+"""Turn Back and Look (SPEC §3.2-3.3, thesis §4.3, §4.6) as a pure state machine.
+
+Given the two reference panoramas it selects the candidate landmarks statically (§4.2);
+then, frame by frame, it is handed the panorama, the odometry at the frame's stamp and
+whether the current move is done, and it tells which move to command next. It tracks
+every candidate with NCC around the position predicted from the EKF's pose and the
+candidate's depth, feeds the bearings to the depth EKF (§4.6), scores each candidate by
+its mean NCC, and in the end keeps the best ``keep`` with their depths and covariances.
+No device, no clock: the runner (daemon/service/learning.py) does the I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from daemon.errors import LearningError
+from daemon.mapping.settings import TblSettings
+from daemon.vision.depth_ekf import BearingOnlyEKF
+from daemon.vision.landmarks import LandmarkSet
+from daemon.vision.panorama import to_grey
+from daemon.vision.selection import select_static
+from daemon.vision.tracking import column_to_bearing_of_centre, predict_column, track
+from hal.base.base import Odometry
+
+
+@dataclass(frozen=True)
+class MoveCommand:
+    """A relative move in the robot frame (m, m, rad) at ``speed`` m/s."""
+
+    dx: float
+    dy: float
+    dyaw: float
+    speed: float
+
+
+@dataclass(frozen=True)
+class Progress:
+    phase: str  # "+x", "back", "-x", ..., "done"
+    fraction: float  # 0..1 of the whole cross
+
+
+def cross_legs(extent: float) -> list[tuple[str, float, float]]:
+    """The cross: out and back along +x, −x, +y, −y, heading kept (§4.3)."""
+    legs = []
+    for name, dx, dy in (("+x", extent, 0.0), ("-x", -extent, 0.0), ("+y", 0.0, extent),
+                         ("-y", 0.0, -extent)):
+        legs += [(name, dx, dy), (f"back from {name}", -dx, -dy)]
+    return legs
+
+
+class TurnBackAndLook:
+    def __init__(self, settings: TblSettings, reference_1: np.ndarray, reference_2: np.ndarray,
+                 margin: int, start: Odometry) -> None:
+        self.settings = settings
+        self.margin = margin
+        self.candidates = select_static(reference_1, reference_2, margin,
+                                        count=settings.candidates)
+        if len(self.candidates.landmarks) < settings.keep:
+            raise LearningError(
+                f"only {len(self.candidates.landmarks)} textured landmark candidates in view "
+                f"(need {settings.keep}): the place is too plain to learn")
+        n = len(self.candidates.landmarks)
+        self.width = self.candidates.width
+        bearings = np.array([lm.bearing for lm in self.candidates.landmarks])
+        self.ekf = BearingOnlyEKF(bearings, initial_depth=settings.initial_depth_m)
+        self.templates = self.candidates.templates()
+        self.cols = self.candidates.cols().astype(float)
+        self.rows = self.candidates.rows().astype(float)
+        self.score_sum = np.zeros(n)
+        self.frames = 0
+        self.legs = cross_legs(settings.extent_m)
+        self.leg = 0
+        self._commanded = False
+        self._last_odometry = start
+
+    @property
+    def done(self) -> bool:
+        return self.leg >= len(self.legs)
+
+    def progress(self) -> Progress:
+        if self.done:
+            return Progress("done", 1.0)
+        return Progress(self.legs[self.leg][0], self.leg / len(self.legs))
+
+    def next_command(self) -> MoveCommand | None:
+        """The move to command now (once per leg), or None while one is under way."""
+        if self.done or self._commanded:
+            return None
+        _, dx, dy = self.legs[self.leg]
+        self._commanded = True
+        return MoveCommand(dx, dy, 0.0, self.settings.speed_m_s)
+
+    def on_frame(self, panorama: np.ndarray, odometry: Odometry, move_done: bool) -> Progress:
+        """One frame during the cross: odometry at the frame's stamp, and whether the move
+        commanded last has finished (the leg then advances)."""
+        self._predict(odometry)
+        grey = to_grey(panorama)
+        pose = self.ekf.pose
+        predicted = np.array([predict_column(self.ekf.estimate(i).bearing,
+                                             min(self.ekf.estimate(i).depth, 50.0), pose,
+                                             self.width)
+                              for i in range(len(self.templates))])
+        result = track(grey, self.margin, self.templates, predicted, self.rows,
+                       self.settings.search_cols, self.settings.search_rows)
+        bearings = column_to_bearing_of_centre(result.cols, self.width)  # robot frame
+        for i, (bearing, score) in enumerate(zip(bearings, result.scores, strict=True)):
+            self.ekf.update(i, float(bearing), float(score))
+        self.score_sum += np.maximum(result.scores, 0.0)
+        self.rows = result.rows
+        self.frames += 1
+        if move_done and self._commanded:
+            self.leg += 1
+            self._commanded = False
+        return self.progress()
+
+    def _predict(self, odometry: Odometry) -> None:
+        a, b = self._last_odometry, odometry
+        c, s = math.cos(a.yaw), math.sin(a.yaw)
+        gx, gy = b.x - a.x, b.y - a.y
+        dyaw = math.remainder(b.yaw - a.yaw, 2 * math.pi)
+        self.ekf.predict(c * gx + s * gy, -s * gx + c * gy, dyaw)
+        self._last_odometry = b
+
+    def result(self) -> LandmarkSet:
+        """The ``keep`` most reliable landmarks (mean NCC over the cross, §4.3) with their
+        depth estimates (§4.6)."""
+        if not self.done or self.frames == 0:
+            raise LearningError("Turn Back and Look has not finished")
+        mean_ncc = self.score_sum / self.frames
+        best = np.argsort(mean_ncc)[::-1][: self.settings.keep]
+        landmarks = []
+        for i in sorted(best, key=lambda k: self.candidates.landmarks[k].bearing):
+            est = self.ekf.estimate(int(i))
+            landmarks.append(replace(self.candidates.landmarks[int(i)], depth=est.depth,
+                                     covariance=est.covariance, bearing=est.bearing,
+                                     score=float(mean_ncc[i])))
+        return LandmarkSet(tuple(landmarks), self.width, self.margin)

@@ -1,0 +1,91 @@
+"""Turn Back and Look through the HAL on the simulated robot (lock-step): the cross is
+driven, 16 landmarks come back with depths; refusals and aborts stop the robot."""
+
+from __future__ import annotations
+
+import math
+import threading
+from pathlib import Path
+
+import pytest
+
+from daemon.errors import LearningAbortedError, LearningError
+from daemon.mapping.settings import TblSettings
+from daemon.mapping.tbl import Progress, cross_legs
+from daemon.service.learning import learn_place
+from daemon.vision.unwarp import Unwarper
+from hal.registry import HalContext, create_base, create_camera
+from hal.sim.factory import shared_sim_robot
+from tests.daemon_harness import REPO
+from tests.sim_helpers import lockstep_config, with_sections
+
+CORRIDOR = str(REPO / "config" / "worlds" / "artificial-corridor.toml")
+
+
+def _devices(config):  # type: ignore[no-untyped-def]
+    ctx = HalContext(config)
+    camera, base = create_camera(config.camera, ctx), create_base(config.base, ctx)
+    camera.open()
+    base.open()
+    return camera, base, shared_sim_robot(ctx)
+
+
+def test_cross_is_out_and_back_along_both_axes() -> None:
+    legs = cross_legs(0.5)
+    assert [(dx, dy) for _, dx, dy in legs] == [
+        (0.5, 0.0), (-0.5, 0.0), (-0.5, 0.0), (0.5, 0.0),
+        (0.0, 0.5), (0.0, -0.5), (0.0, -0.5), (0.0, 0.5)]
+
+
+def test_learning_in_the_artificial_corridor() -> None:
+    config = lockstep_config(world=CORRIDOR, start_pose=[0.0, 0.0, 0.0])
+    camera, base, robot = _devices(config)
+    seen: list[Progress] = []
+    landmarks = learn_place(camera, base, Unwarper(config.mirror, config.panorama),
+                            TblSettings(), progress=seen.append)
+    assert len(landmarks.landmarks) == 16
+    assert seen[-1] == Progress("done", 1.0)
+    assert [p.fraction for p in seen] == sorted(p.fraction for p in seen)
+    x, y, yaw = robot.true_pose()
+    assert math.hypot(x, y) < 1e-6 and yaw == 0.0  # back at the reference pose
+    # The markers on the side walls are 0.7 m away across the corridor.
+    side = [lm for lm in landmarks.landmarks if abs(abs(lm.bearing) - math.pi / 2) < 0.2]
+    assert side and all(abs(lm.depth - 0.7) < 0.1 for lm in side)
+    assert all(lm.covariance.shape == (2, 2) and lm.covariance[0, 0] > 0
+               for lm in landmarks.landmarks)
+
+
+def test_refused_when_the_base_cannot_move() -> None:
+    config = with_sections(lockstep_config(world=CORRIDOR), base_sim={"can_move": False})
+    camera, base, _ = _devices(config)
+    with pytest.raises(LearningError, match="cannot move"):
+        learn_place(camera, base, Unwarper(config.mirror, config.panorama), TblSettings())
+
+
+def test_abort_stops_the_robot_and_returns_nothing() -> None:
+    config = lockstep_config(world=CORRIDOR, start_pose=[0.0, 0.0, 0.0])
+    camera, base, robot = _devices(config)
+    abort = threading.Event()
+
+    def progress(p: Progress) -> None:
+        if p.fraction >= 0.25:
+            abort.set()
+
+    with pytest.raises(LearningAbortedError):
+        learn_place(camera, base, Unwarper(config.mirror, config.panorama), TblSettings(),
+                    progress=progress, abort=abort)
+    robot.advance_to(robot._t_ns + int(2e9))
+    assert not robot.status().moving
+
+
+def test_refused_when_frames_stop(tmp_path: Path) -> None:
+    scenario = tmp_path / "stall.toml"
+    scenario.write_text(f'world = "{CORRIDOR}"\nstart_pose = [0.0, 0.0, 0.0]\n'
+                        "[[camera_stall]]\nt_s = 2.0\nduration_s = 30.0\n")
+    config = lockstep_config(scenario=str(scenario), realtime=True)
+    camera, base, robot = _devices(config)
+    with pytest.raises(LearningError, match="frames stopped"):
+        learn_place(camera, base, Unwarper(config.mirror, config.panorama),
+                    TblSettings(frame_timeout_s=0.5))
+    robot.advance_to(robot.wall_time_ns() + int(2e9))
+    assert not robot.status().moving  # stopped after the refusal

@@ -1,0 +1,88 @@
+"""``placecell-eval depth``: depth estimates of Turn Back and Look against the world
+(SPEC §3.3, thesis §4.6.4-4.6.5).
+
+For each place (a pose in a world), the simulated robot learns the place through the
+daemon's own learning routine (lock-step simulation, the HAL sim backends); each landmark's
+estimated depth is compared with the distance to the surface seen at its reference
+bearing and row, and its 2 x 2 covariance with that error (2-sigma ellipse: Mahalanobis
+distance <= 2, 86 % for an honest Gaussian).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from daemon.config import load
+from daemon.mapping.settings import TblSettings
+from daemon.service.learning import learn_place
+from daemon.vision.unwarp import Unwarper
+from hal.registry import HalContext, create_base, create_camera
+from hal.sim.factory import shared_sim_robot
+from hal.sim.world import load_world
+from tools.eval.truth import landmark_depth
+
+ARTIFICIAL = str(Path(__file__).resolve().parents[2] / "config" / "worlds" /
+                 "artificial-corridor.toml")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--artificial", action="store_true",
+                   help="the corridor with flat markers 0.7 m away (thesis §4.6.4)")
+    p.add_argument("--places", type=int, default=5, help="places (world seeds) to learn")
+
+
+def _places(args: argparse.Namespace) -> list[tuple[str, tuple[float, float, float]]]:
+    if args.artificial:
+        return [(ARTIFICIAL, (x, 0.0, 0.0)) for x in np.linspace(-1.0, 1.0, args.places)]
+    out = []
+    for k in range(args.places):
+        world = f"generate:{args.world_kind}:{args.world_seed + k}"
+        out.append((world, load_world(world).start_pose))
+    return out
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    base_config = load(None)
+    errors, inside, far = [], [], 0
+    for world, pose in _places(args):
+        config = dataclasses.replace(base_config, sim=dataclasses.replace(
+            base_config.sim, world=world, start_pose=list(pose), realtime=False,
+            seed=args.seed))
+        ctx = HalContext(config)
+        camera, base = create_camera(config.camera, ctx), create_base(config.base, ctx)
+        camera.open()
+        base.open()
+        robot = shared_sim_robot(ctx)
+        reference = robot.true_pose()
+        landmarks = learn_place(camera, base, Unwarper(config.mirror, config.panorama),
+                                TblSettings())
+        assert robot.renderer is not None
+        for lm in landmarks.landmarks:
+            truth = landmark_depth(robot.renderer, reference, lm.bearing, lm.row)
+            if not math.isfinite(lm.depth):
+                far += 1  # "no finite depth" claimed: counted, not an error figure
+                continue
+            error = lm.depth - truth
+            errors.append(abs(error))
+            diff = np.array([error, 0.0])
+            # 2-sigma ellipse: Mahalanobis distance of the depth error <= 2 (the bearing
+            # of the template is its own reference, so only depth is tested here).
+            inside.append(float(diff[0] ** 2 / lm.covariance[0, 0]) <= 4.0)
+    return {
+        "world": {"kind": "artificial-corridor" if args.artificial else args.world_kind,
+                  "seed": args.world_seed},
+        "config": {"places": args.places, "tbl": dataclasses.asdict(TblSettings())},
+        "metrics": {
+            "median_error_m": round(float(np.median(errors)), 4),
+            "max_error_m": round(float(np.max(errors)), 4),
+            "coverage_2sigma": round(float(np.mean(inside)), 4),
+            "landmarks": len(errors),
+            "landmarks_without_finite_depth": far,
+        },
+    }
