@@ -18,3 +18,8 @@ class TblSettings:
     search_cols: int = setting(12, ge=2, le=64, doc="tracking window half-width (columns)")
     search_rows: int = setting(6, ge=1, le=32, doc="tracking window half-height (rows)")
     initial_depth_m: float = setting(2.5, gt=0.0, le=50.0, doc="EKF prior depth (§4.6)")
+    heading_noise_per_m: float = setting(0.02, ge=0.0, le=1.0,
+                                         doc="EKF odometry heading noise gained per metre")
+    observation_inflation: float = setting(
+        3.0, ge=1.0, le=100.0, doc="EKF: one frame's bearing counts as 1/this of an "
+        "independent observation (successive frames' errors are correlated)")

@@ -65,7 +65,9 @@ class TurnBackAndLook:
         n = len(self.candidates.landmarks)
         self.width = self.candidates.width
         bearings = np.array([lm.bearing for lm in self.candidates.landmarks])
-        self.ekf = BearingOnlyEKF(bearings, initial_depth=settings.initial_depth_m)
+        self.ekf = BearingOnlyEKF(bearings, initial_depth=settings.initial_depth_m,
+                                  heading_noise_per_m=settings.heading_noise_per_m,
+                                  observation_inflation=settings.observation_inflation)
         self.templates = self.candidates.templates()
         self.cols = self.candidates.cols().astype(float)
         self.rows = self.candidates.rows().astype(float)

@@ -41,7 +41,9 @@ def observation_variance(ncc: float) -> float:
 class BearingOnlyEKF:
     def __init__(self, bearings: np.ndarray, *, initial_depth: float = 2.5,
                  inverse_depth_sigma: float = 0.5, bearing_sigma: float = math.radians(1.0),
-                 translation_noise: float = 0.01, rotation_noise: float = 0.10) -> None:
+                 translation_noise: float = 0.01, rotation_noise: float = 0.10,
+                 heading_noise_per_m: float = 0.002, observation_inflation: float = 1.0
+                 ) -> None:
         n = len(bearings)
         self.n = n
         self.x = np.zeros(3 + 2 * n)
@@ -52,6 +54,11 @@ class BearingOnlyEKF:
         self.P[4::2, 4::2][np.diag_indices(n)] = bearing_sigma**2
         self.translation_noise = translation_noise  # std per metre travelled
         self.rotation_noise = rotation_noise  # std per radian turned
+        self.heading_noise_per_m = heading_noise_per_m  # heading std gained per metre
+        # Successive frames' tracking errors are correlated (the same template seen from
+        # almost the same place): each observation counts as 1/inflation of an
+        # independent one.
+        self.observation_inflation = observation_inflation
 
     @property
     def pose(self) -> tuple[float, float, float]:
@@ -71,7 +78,8 @@ class BearingOnlyEKF:
         # Process noise in the robot frame: translation under translation, rotation under
         # rotation (thesis: 0.01 and 0.10), a little rotation under translation.
         q_t = (self.translation_noise * dist) ** 2 + 1e-10
-        q_r = (self.rotation_noise * abs(dtheta)) ** 2 + (0.002 * dist) ** 2 + 1e-10
+        q_r = (self.rotation_noise * abs(dtheta)) ** 2 + (self.heading_noise_per_m * dist
+                                                          ) ** 2 + 1e-10
         G = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         Q = G @ np.diag([q_t, q_t, q_r]) @ G.T
         P = self.P
@@ -97,14 +105,15 @@ class BearingOnlyEKF:
         H[2] = -1.0
         H[k] = (-u * y + v * x) / q
         H[k + 1] = (u * math.cos(gamma) + v * math.sin(gamma)) / q
+        R = observation_variance(ncc) * self.observation_inflation
         PH = self.P @ H
-        S = float(H @ PH) + observation_variance(ncc)
+        S = float(H @ PH) + R
         K = PH / S
         self.x += K * innovation
         self.x[2] = float(wrap_angle(self.x[2]))
         # Joseph form keeps P symmetric and positive semi-definite.
         IKH = np.eye(len(self.x)) - np.outer(K, H)
-        self.P = IKH @ self.P @ IKH.T + np.outer(K, K) * observation_variance(ncc)
+        self.P = IKH @ self.P @ IKH.T + np.outer(K, K) * R
 
     def estimate(self, i: int) -> DepthEstimate:
         k = 3 + 2 * i
