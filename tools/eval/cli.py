@@ -20,6 +20,7 @@ from daemon.errors import PlacecellError
 # experiment -> (module, default world kind, one-line help)
 EXPERIMENTS: dict[str, tuple[str, str, str]] = {
     "depth": ("tools.eval.depth", "open-room", "TBL depth-estimate error (SPEC §3.3)"),
+    "recognise": ("tools.eval.recognise", "", "LRP of a landmark set in real images"),
 }
 
 

@@ -1,0 +1,56 @@
+"""placecell-eval experiments of the landmark level, run as a person would."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from daemon.config import load
+from hal.sim.render import Renderer
+from hal.sim.world import load_world
+from tests.daemon_harness import REPO, venv_bin
+
+
+def test_recognise_on_camera_images(tmp_path: Path) -> None:
+    """Images made by rendering stand in for photographs of a real mirror camera."""
+    c = load(None)
+    renderer = Renderer(load_world("generate:office:1"), c.mirror, c.panorama, (640, 480))
+    rng = np.random.default_rng(0)
+    poses = {"a": (3.0, 10.0, 0.0), "b": (3.0, 10.0, 0.0), "same": (3.0, 10.0, 0.0),
+             "near": (3.2, 10.1, 0.1), "elsewhere": (15.0, 4.0, 1.0)}
+    for name, pose in poses.items():
+        cv2.imwrite(str(tmp_path / f"{name}.png"),
+                    renderer.donut(pose, noise_sigma=2.0, rng=rng))
+    out = subprocess.run(
+        [venv_bin("placecell-eval"), "recognise", "--reference", str(tmp_path / "a.png"),
+         str(tmp_path / "b.png"), "--images", str(tmp_path / "same.png"),
+         str(tmp_path / "near.png"), str(tmp_path / "elsewhere.png"), "--json",
+         "--plots", str(tmp_path / "plots")],
+        cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    result = json.loads(out.stdout)
+    same, near, elsewhere = result["metrics"]["lrp"]
+    assert same > 0.9 and same > near > elsewhere
+    mirror = result["metrics"]["mirror"]
+    assert abs(mirror["center_x_px"] - 320) <= 2 and abs(mirror["r_outer_px"] - 228) <= 3
+    assert len(list((tmp_path / "plots").glob("*.png"))) == 4
+    bad = subprocess.run(
+        [venv_bin("placecell-eval"), "recognise", "--reference", str(tmp_path / "a.png"),
+         str(tmp_path / "b.png"), "--images", str(tmp_path / "same.png"), "--mirror", "1,2"],
+        cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and "--mirror" in bad.stderr
+
+
+def test_depth_experiment_prints_its_metrics() -> None:
+    out = subprocess.run([venv_bin("placecell-eval"), "depth", "--artificial", "--places", "1",
+                          "--json"], cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    result = json.loads(out.stdout)
+    assert result["experiment"] == "depth"
+    metrics = result["metrics"]
+    assert set(metrics) >= {"median_error_m", "max_error_m", "coverage_2sigma"}
+    assert metrics["landmarks"] == 16 and metrics["median_error_m"] < 0.10
