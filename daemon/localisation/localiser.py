@@ -65,11 +65,11 @@ class Localiser:
         if odo is not None and self._last_odometry is not None:
             motion = relative_motion(self._last_odometry, odo)
         self._last_odometry = odo
+        state: BeliefState = "uninitialised"
         if self.places == 0:
-            state: BeliefState = "uninitialised"
-            reason = "the map has no places yet: learn one (placecellctl learn)"
+            reason = "the map has no places yet"
         else:
-            state, reason = "lost", "place recognition is not running in this build"
+            reason = f"the map has {self.places} places; localising in them is not built yet"
         if odo is None:
             reason += "; no odometry at this frame (base silent): motion unknown"
         return Belief(
