@@ -21,6 +21,10 @@ from daemon.errors import PlacecellError
 EXPERIMENTS: dict[str, tuple[str, str, str]] = {
     "depth": ("tools.eval.depth", "open-room", "TBL depth-estimate error (SPEC §3.3)"),
     "recognise": ("tools.eval.recognise", "", "LRP of a landmark set in real images"),
+    "recognition-range": (
+        "tools.eval.recognition_range", "open-room", "area where a place's LRP stays up (§3.4)"
+    ),
+    "robustness": ("tools.eval.robustness", "office", "LRP under light changes and occlusion"),
 }
 
 

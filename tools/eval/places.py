@@ -1,0 +1,61 @@
+"""Learning places on the simulated robot for evaluations: the daemon's own learn_place
+through the HAL sim backends in lock-step; the evaluator keeps the renderer for test views
+and the true reference pose (never handed to the method)."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from daemon.config import PlacecellConfig, load
+from daemon.mapping.settings import TblSettings
+from daemon.service.learning import learn_place
+from daemon.vision.landmarks import LandmarkSet
+from daemon.vision.selection import select_static
+from daemon.vision.unwarp import Unwarper
+from hal.registry import HalContext, create_base, create_camera
+from hal.sim.factory import shared_sim_robot
+from hal.sim.render import Person, Renderer
+
+
+@dataclass
+class LearnedPlace:
+    pose: tuple[float, float, float]  # true reference pose (evaluator only)
+    tbl: LandmarkSet  # Turn Back and Look: 16 landmarks with depths
+    static: LandmarkSet  # the 16 best of static selection alone, same reference
+    renderer: Renderer
+
+
+def learn(world: str, pose: tuple[float, float, float], seed: int,
+          config: PlacecellConfig | None = None) -> LearnedPlace:
+    base_config = config or load(None)
+    cfg = dataclasses.replace(base_config, sim=dataclasses.replace(
+        base_config.sim, world=world, start_pose=list(pose), realtime=False, seed=seed))
+    ctx = HalContext(cfg)
+    camera, base = create_camera(cfg.camera, ctx), create_base(cfg.base, ctx)
+    camera.open()
+    base.open()
+    robot = shared_sim_robot(ctx)
+    reference = robot.true_pose()
+    unwarper = Unwarper(cfg.mirror, cfg.panorama)
+    margin = cfg.panorama.wrap_margin
+    # Static-only: the same two reference frames the TBL starts from would do; two fresh
+    # frames at the reference give the same statistics.
+    p1 = unwarper.unwarp(robot.render_frame().image)
+    p2 = unwarper.unwarp(robot.render_frame().image)
+    full = select_static(p1, p2, margin)
+    best = sorted(full.landmarks, key=lambda lm: lm.score, reverse=True)[:16]
+    static = LandmarkSet(tuple(best), full.width, margin)
+    tbl = learn_place(camera, base, unwarper, TblSettings())
+    assert robot.renderer is not None
+    return LearnedPlace(reference, tbl, static, robot.renderer)
+
+
+def view(place: LearnedPlace, unwarper: Unwarper, pose: tuple[float, float, float],
+         rng: np.random.Generator, *, gain: float = 1.0,
+         people: tuple[Person, ...] = ()) -> np.ndarray:
+    """The panorama the robot would unwarp at ``pose`` (noise sigma 2)."""
+    raw = place.renderer.donut(pose, people=people, gain=gain, noise_sigma=2.0, rng=rng)
+    return unwarper.unwarp(raw)

@@ -1,0 +1,86 @@
+"""``placecell-eval recognition-range``: the area around a place's reference pose where
+its landmark set is still recognised (SPEC §3.2: selection matters; thesis §4.3).
+
+For each place (the centre of a generated cluttered room, one world seed each) the set
+chosen by Turn Back and Look and the 16 best of static selection alone are learned at the
+same reference. On a grid of poses around the reference (same heading, 0.25 m apart, at
+least 0.4 m from any wall), the set counts as recognised where its LRP stays above its
+background LRP + 0.05; the background is the median LRP of the set in panoramas of the
+other places' worlds. The recognised area is reported for both selections.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+import numpy as np
+
+from daemon.config import load
+from daemon.vision.landmarks import LandmarkSet
+from daemon.vision.panorama import to_grey
+from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
+from daemon.vision.unwarp import Unwarper
+from hal.sim.world import load_world
+from tools.eval.places import LearnedPlace, learn, view
+
+STEP = 0.25
+REACH = 2.0
+MARGIN = 0.05
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--places", type=int, default=5)
+
+
+def _free(place: LearnedPlace, x: float, y: float) -> bool:
+    """At least 0.4 m from every wall and obstacle (a robot could stand there)."""
+    angles = np.linspace(-np.pi, np.pi, 24, endpoint=False)
+    hit = place.renderer._cast(x, y, angles, ())
+    nearest = np.minimum(hit["t_full"], hit.get("t_low", hit["t_full"]))
+    return bool(nearest.min() > 0.4)
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    config = load(None)
+    kind = args.world_kind or "open-room"
+    worlds = [f"generate:{kind}:{args.world_seed + k}" for k in range(args.places)]
+    places = [learn(w, load_world(w).start_pose, args.seed) for w in worlds]
+    unwarper = Unwarper(config.mirror, config.panorama)
+    matcher = FastMatcher()
+    rng = np.random.default_rng(args.seed)
+    refs = [PreparedPanorama.of(to_grey(view(p, unwarper, p.pose, rng))) for p in places]
+    areas: dict[str, list[float]] = {"tbl": [], "static": []}
+    for k, place in enumerate(places):
+        sets: dict[str, LandmarkSet] = {"tbl": place.tbl, "static": place.static}
+        prepared = {name: PreparedTemplates.of(s.templates()) for name, s in sets.items()}
+        background = {name: float(np.median([matcher.lrp(refs[j], t)
+                                             for j in range(len(places)) if j != k]))
+                      for name, t in prepared.items()}
+        x0, y0, yaw = place.pose
+        counts = {"tbl": 0, "static": 0}
+        offsets = np.arange(-REACH, REACH + 1e-9, STEP)
+        for dx in offsets:
+            for dy in offsets:
+                x, y = x0 + dx, y0 + dy
+                if not _free(place, x, y):
+                    continue
+                pano = PreparedPanorama.of(to_grey(view(place, unwarper, (x, y, yaw), rng)))
+                for name, t in prepared.items():
+                    if matcher.lrp(pano, t) > background[name] + MARGIN:
+                        counts[name] += 1
+        for name in counts:
+            areas[name].append(counts[name] * STEP * STEP)
+    return {
+        "world": {"kind": kind, "seed": args.world_seed},
+        "config": {"places": args.places, "grid_step_m": STEP, "reach_m": REACH,
+                   "margin": MARGIN},
+        "metrics": {
+            "tbl_area_m2": round(float(np.mean(areas["tbl"])), 3),
+            "static_area_m2": round(float(np.mean(areas["static"])), 3),
+            "tbl_larger_fraction": round(float(np.mean(
+                [t > s for t, s in zip(areas["tbl"], areas["static"], strict=True)])), 3),
+            "tbl_area_per_place_m2": [round(a, 3) for a in areas["tbl"]],
+            "static_area_per_place_m2": [round(a, 3) for a in areas["static"]],
+        },
+    }
