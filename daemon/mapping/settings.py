@@ -21,5 +21,5 @@ class TblSettings:
     heading_noise_per_m: float = setting(0.02, ge=0.0, le=1.0,
                                          doc="EKF odometry heading noise gained per metre")
     observation_inflation: float = setting(
-        3.0, ge=1.0, le=100.0, doc="EKF: one frame's bearing counts as 1/this of an "
+        2.0, ge=1.0, le=100.0, doc="EKF: one frame's bearing counts as 1/this of an "
         "independent observation (successive frames' errors are correlated)")
