@@ -18,6 +18,9 @@ class TblSettings:
     search_cols: int = setting(12, ge=2, le=64, doc="tracking window half-width (columns)")
     search_rows: int = setting(6, ge=1, le=32, doc="tracking window half-height (rows)")
     initial_depth_m: float = setting(2.5, gt=0.0, le=50.0, doc="EKF prior depth (§4.6)")
+    reference_bearing_sigma_deg: float = setting(
+        0.1, gt=0.0, le=10.0, doc="EKF prior on a landmark's reference bearing: measured in "
+        "the reference panorama at a known pose, to a fraction of a column")
     heading_noise_per_m: float = setting(0.02, ge=0.0, le=1.0,
                                          doc="EKF odometry heading noise gained per metre")
     observation_inflation: float = setting(

@@ -66,6 +66,7 @@ class TurnBackAndLook:
         self.width = self.candidates.width
         bearings = np.array([lm.bearing for lm in self.candidates.landmarks])
         self.ekf = BearingOnlyEKF(bearings, initial_depth=settings.initial_depth_m,
+                                  bearing_sigma=math.radians(settings.reference_bearing_sigma_deg),
                                   heading_noise_per_m=settings.heading_noise_per_m,
                                   observation_inflation=settings.observation_inflation)
         self.templates = self.candidates.templates()

@@ -19,13 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from daemon.config import load
 from daemon.mapping.settings import TblSettings
-from daemon.service.learning import learn_place
-from daemon.vision.unwarp import Unwarper
-from hal.registry import HalContext, create_base, create_camera
-from hal.sim.factory import shared_sim_robot
+from daemon.vision.landmarks import centre_bearing
 from hal.sim.world import load_world
+from tools.eval.places import learn
 from tools.eval.truth import landmark_depth
 
 ARTIFICIAL = str(Path(__file__).resolve().parents[2] / "config" / "worlds" /
@@ -49,23 +46,15 @@ def _places(args: argparse.Namespace) -> list[tuple[str, tuple[float, float, flo
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    base_config = load(None)
     errors, inside, far, near_errors = [], [], 0, []
     for world, pose in _places(args):
-        config = dataclasses.replace(base_config, sim=dataclasses.replace(
-            base_config.sim, world=world, start_pose=list(pose), realtime=False,
-            seed=args.seed))
-        ctx = HalContext(config)
-        camera, base = create_camera(config.camera, ctx), create_base(config.base, ctx)
-        camera.open()
-        base.open()
-        robot = shared_sim_robot(ctx)
-        reference = robot.true_pose()
-        landmarks = learn_place(camera, base, Unwarper(config.mirror, config.panorama),
-                                TblSettings())
-        assert robot.renderer is not None
+        place = learn(world, pose, args.seed)
+        landmarks, reference = place.tbl, place.pose
         for lm in landmarks.landmarks:
-            truth = landmark_depth(robot.renderer, reference, lm.bearing, lm.row)
+            # The true landmark: the surface point seen at the template's centre pixel in
+            # the reference panorama (its bearing from the column, its depth from the world).
+            true_bearing = centre_bearing(lm.col, landmarks.width)
+            truth = landmark_depth(place.renderer, reference, true_bearing, lm.row)
             if not math.isfinite(lm.depth):
                 far += 1  # "no finite depth" claimed: counted, not an error figure
                 continue
@@ -73,10 +62,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             errors.append(abs(error))
             if truth <= 1.0:  # SPEC §3.3: ±0.1 m expected for landmarks within ~1 m
                 near_errors.append(abs(error))
-            diff = np.array([error, 0.0])
-            # 2-sigma ellipse: Mahalanobis distance of the depth error <= 2 (the bearing
-            # of the template is its own reference, so only depth is tested here).
-            inside.append(float(diff[0] ** 2 / lm.covariance[0, 0]) <= 4.0)
+            # Inside the 2-sigma ellipse of the (d, γ) covariance: Mahalanobis distance <= 2
+            # (a perfect Gaussian: 1 − e^−2 = 86 %).
+            diff = np.array([error, math.remainder(lm.bearing - true_bearing, 2 * math.pi)])
+            inside.append(float(diff @ np.linalg.solve(lm.covariance, diff)) <= 4.0)
     return {
         "world": {"kind": "artificial-corridor" if args.artificial else args.world_kind,
                   "seed": args.world_seed},
