@@ -27,23 +27,25 @@ CASES = [  # world, centre x, centre y, r_inner, r_outer, noise sigma
 
 
 def _render(spec: str, cx: float, cy: float, r_in: float, r_out: float, noise: float,
-            seed: int = 0) -> np.ndarray:
+            seed: int = 0, turn: bool = False) -> np.ndarray:
     c = load(None)
     mirror = dataclasses.replace(c.mirror, center_x_px=cx, center_y_px=cy, r_inner_px=r_in,
                                  r_outer_px=r_out)
     world = load_world(spec)
     renderer = Renderer(world, mirror, c.panorama, (640, 480))
-    return renderer.donut(world.start_pose, noise_sigma=noise,
-                          rng=np.random.default_rng(seed))
+    x, y, yaw = world.start_pose
+    pose = (x + 0.7, y - 0.3, yaw + 1.0) if turn else (x, y, yaw)
+    return renderer.donut(pose, noise_sigma=noise, rng=np.random.default_rng(seed))
 
 
 @pytest.mark.parametrize(("spec", "cx", "cy", "r_in", "r_out", "noise"), CASES)
 def test_recovers_centre_and_radii(spec: str, cx: float, cy: float, r_in: float,
                                    r_out: float, noise: float) -> None:
-    g = detect_mirror(_render(spec, cx, cy, r_in, r_out, noise))
-    assert abs(g.center_x_px - cx) <= 2.0 and abs(g.center_y_px - cy) <= 2.0
-    assert abs(g.r_outer_px - r_out) <= 3.0
-    assert abs(g.r_inner_px - r_in) <= 3.0
+    for seed, turn in ((0, False), (1, True), (2, False), (3, True)):
+        g = detect_mirror(_render(spec, cx, cy, r_in, r_out, noise, seed, turn))
+        assert abs(g.center_x_px - cx) <= 2.0 and abs(g.center_y_px - cy) <= 2.0
+        assert abs(g.r_outer_px - r_out) <= 3.0
+        assert abs(g.r_inner_px - r_in) <= 3.0
 
 
 def test_cli_prints_a_mirror_section(tmp_path: Path) -> None:

@@ -26,9 +26,6 @@ class OdometryBuffer:
                 continue
             self._samples.append(s)
 
-    def clear(self) -> None:
-        self._samples.clear()
-
     @property
     def latest(self) -> Odometry | None:
         return self._samples[-1] if self._samples else None

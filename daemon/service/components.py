@@ -9,7 +9,7 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from daemon.localisation.localiser import Belief, Localiser
-from daemon.service.health import ComponentHealth, RateMeter
+from daemon.service.health import ComponentHealth
 from hal.base.base import Base, Odometry
 from hal.camera.base import Camera, Frame
 
@@ -110,7 +110,6 @@ class ProcessingComponent:
         self._on_belief = on_belief
         self._health = health
         self.localiser: Localiser | None = None
-        self.timings = RateMeter()
 
     def setup(self) -> None:
         self.localiser = self._make()

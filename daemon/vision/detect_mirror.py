@@ -80,7 +80,14 @@ def _edges(grey: np.ndarray, cx: float, cy: float, r_max: float
     scale = r_max / n_r
     r_rough = r_max / 1.25
     lo, hi = int(0.6 * r_rough / scale), min(n_r - 1, int(1.2 * r_rough / scale))
-    outer = (lo + np.argmin(grad[:, lo:hi], axis=1)) * scale
+    # Rim: walking in from outside, the first strong fall in brightness (mirror -> dark
+    # surround). Scanning from outside means dark things seen in the mirror, further in,
+    # cannot be taken for it: among the falls steeper than half the ray's steepest, the
+    # outermost wins.
+    band = grad[:, lo:hi]
+    steep = band <= 0.5 * band.min(axis=1, keepdims=True)
+    outermost = band.shape[1] - 1 - np.argmax(steep[:, ::-1], axis=1)
+    outer = (lo + outermost) * scale
     # Inner edge: the first departure, walking out from the centre, from the uniform level
     # of the camera's own reflection (texture further out cannot be mistaken for it).
     core = polar[:, : max(2, int(0.03 * r_rough / scale))]

@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 
 from daemon.vision.mirror import MirrorModel
-from daemon.vision.panorama import bearing_of_column, elevation_of_row, geometry_checksum
+from daemon.vision.panorama import bearing_of_column, elevation_of_row
 from daemon.vision.settings import MirrorSettings, PanoramaSettings
 
 
@@ -35,11 +35,6 @@ class Unwarper:
         self._map1, self._map2 = cv2.convertMaps(u.astype(np.float32), v.astype(np.float32),
                                                  cv2.CV_16SC2)
 
-    @property
-    def shape(self) -> tuple[int, int]:
-        p = self.panorama
-        return p.height, p.width + 2 * p.wrap_margin
-
     def unwarp(self, raw: np.ndarray) -> np.ndarray:
         """One frame: ``(h, w[, 3])`` uint8 raw image -> ``(H, W + 2m[, 3])`` uint8."""
         if raw.dtype != np.uint8 or raw.ndim not in (2, 3):
@@ -47,9 +42,6 @@ class Unwarper:
                              f"{raw.shape}")
         return cv2.remap(raw, self._map1, self._map2, interpolation=cv2.INTER_LINEAR,
                          borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-
-    def geometry_checksum(self) -> str:
-        return geometry_checksum(self.mirror, self.panorama)
 
     def floor_distance_of_rows(self) -> np.ndarray:
         """Horizontal distance (m) to the floor point seen by each row; inf at or above the

@@ -44,8 +44,3 @@ class SimCamera:
 
     def stats(self) -> Mapping[str, float]:
         return {"frames": self._frames, "timeouts": self._timeouts}
-
-    @property
-    def robot(self) -> SimRobot | None:
-        """The simulated robot (for tools that need ground truth; never the method)."""
-        return self._robot

@@ -80,7 +80,6 @@ class SimRobot:
         self._next_frame_ns = 0
         self._kidnaps_done = 0
         self._waypoint = 0  # the scenario autopilot's next waypoint
-        self._travelled = 0.0
 
     # ------------------------------------------------------------------ time
     def now_ns(self) -> int:
@@ -130,7 +129,6 @@ class SimRobot:
         """Odometry = true body motion with drift (SPEC §10)."""
         b = self.base
         ds = math.hypot(dx, dy)
-        self._travelled += ds
         if ds > 0:
             noise = self._rng.normal(0.0, 1.0, 3)
             scale = 1.0 + b.scale_error
@@ -285,10 +283,6 @@ class SimRobot:
         """(stamp_ns, true pose): for recordings and evaluation, never for the method."""
         with self._lock:
             return self.now_ns(), self._pose
-
-    @property
-    def travelled_m(self) -> float:
-        return self._travelled
 
     # ------------------------------------------------------------------ camera side
     def next_frame(self, timeout: float) -> Frame | None:
