@@ -73,8 +73,10 @@ def _edges(grey: np.ndarray, cx: float, cy: float, r_max: float
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Radius of the rim edge and of the inner edge on each of 360 rays."""
     n_r = int(np.ceil(r_max))
+    # WARP_FILL_OUTLIERS: rays leaving the image read 0 (dark surround); without it
+    # OpenCV leaves those pixels uninitialised, which made results vary run to run.
     polar = cv2.warpPolar(grey.astype(np.float32), (n_r, 360), (cx, cy), r_max,
-                          cv2.INTER_LINEAR + cv2.WARP_POLAR_LINEAR)
+                          cv2.INTER_LINEAR + cv2.WARP_POLAR_LINEAR + cv2.WARP_FILL_OUTLIERS)
     polar = cv2.GaussianBlur(polar, (1, 5), 0)  # smooth along the angle only
     grad = np.gradient(polar, axis=1)
     scale = r_max / n_r
