@@ -49,8 +49,6 @@ class Daemon:
         self._publishers: dict[str, Any] = {}
         self._belief: Belief | None = None
         self._belief_received_ns = 0
-        self._status_lock = threading.Lock()
-        self._last_status: bytes = b""
         self.hal = HalContext(config)
         # The map first: a map made with another geometry stops the daemon before any device.
         self.map = MapStore.open(config.map.path, geometry_checksum(config.mirror,
@@ -123,9 +121,10 @@ class Daemon:
     def _on_belief(self, belief: Belief) -> None:
         self._belief = belief
         self._belief_received_ns = time.monotonic_ns()
-        self.publish("belief", zenoh_link.encode("placecell.belief", _belief_body(belief)))
+        body = _belief_body(belief)
+        self.publish("belief", zenoh_link.encode("placecell.belief", body))
         if self.recorder is not None:
-            self.recorder.write_json("belief", belief.stamp_ns, _belief_body(belief))
+            self.recorder.write_json("belief", belief.stamp_ns, body)
 
     # ------------------------------------------------------------------ status
     def status(self) -> dict[str, Any]:
