@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from daemon.vision.panorama import elevation_of_row
+from daemon.vision.panorama import elevation_of_row, row_of_elevation
 from daemon.vision.settings import MirrorSettings, PanoramaSettings
 
 
@@ -47,6 +47,31 @@ def hyperboloid_radius(phi: np.ndarray, a: float, b: float, focal_px: float) -> 
     return np.where(np.isfinite(r), r, np.nan)
 
 
+def hyperboloid_elevation(r: np.ndarray, a: float, b: float, focal_px: float) -> np.ndarray:
+    """Inverse of :func:`hyperboloid_radius`: elevation (rad), seen from the mirror's focus,
+    of the world direction imaged at radius ``r`` (px); NaN where the pixel's ray misses the
+    mirror (§3.7.2)."""
+    r = np.asarray(r, dtype=float)
+    c = math.hypot(a, b)
+    q = r / focal_px
+    # Pixel ray from the pinhole P = (0, −c): (ρ, Z) = (k q, k − c), k > 0. On the mirror
+    # Z²/b² − ρ²/a² = 1:  k² (1/b² − q²/a²) − k (2c/b²) + (c²/b² − 1) = 0.
+    A = 1.0 / b**2 - q**2 / a**2
+    B = -2.0 * c / b**2
+    C = a**2 / b**2
+    disc = B * B - 4.0 * A * C
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sq = np.sqrt(np.where(disc >= 0, disc, np.nan))
+        roots = np.stack([(-B - sq) / (2.0 * A), (-B + sq) / (2.0 * A)])
+    # The mirror is the upper sheet (Z >= b); the pixel sees its first hit there.
+    on_sheet = np.isfinite(roots) & (roots > 0) & (roots - c >= b * (1.0 - 1e-9))
+    k = np.where(on_sheet, roots, np.inf).min(axis=0)
+    rho, z = k * q, k - c
+    with np.errstate(invalid="ignore"):
+        phi = np.arctan2(z - c, rho)  # direction from the focus F = (0, c) to the hit point
+    return np.where(np.isfinite(k), phi, np.nan)
+
+
 class MirrorModel:
     """Maps panorama (row, bearing) to raw image points for one configuration."""
 
@@ -67,6 +92,40 @@ class MirrorModel:
         norm = np.polynomial.polynomial.polyval(u, np.asarray(m.poly_coeffs, dtype=float))
         return np.asarray(m.r_inner_px + (m.r_outer_px - m.r_inner_px) * norm)
 
+    def row_of_radius(self, r: np.ndarray) -> np.ndarray:
+        """Fractional panorama row imaged at radius ``r`` (px): the inverse of
+        :meth:`radius_of_row` (NaN outside the mirror, or outside the polynomial's range)."""
+        r = np.asarray(r, dtype=float)
+        m, p = self.mirror, self.panorama
+        if m.model == "hyperboloid":
+            phi = hyperboloid_elevation(r, m.a_m, m.b_m, m.focal_px)
+            return np.asarray(row_of_elevation(phi, p.height, self.top, self.bottom))
+        # The polynomial need not be invertible in closed form: invert it on a fine table
+        # of rows (it must be monotonic over the band, as any usable radial model is).
+        rows = np.linspace(-0.5, p.height - 0.5, 8 * p.height + 1)
+        radii = self.radius_of_row(rows)
+        if not np.all(np.diff(radii) < 0):
+            raise ValueError("mirror.poly_coeffs: the radius must grow from the bottom row "
+                             "to the top row")
+        out = np.interp(r, radii[::-1], rows[::-1], left=np.nan, right=np.nan)
+        return np.asarray(out)
+
+    def radius_of_elevation(self, phi: np.ndarray) -> np.ndarray:
+        """Image radius (px) of elevation ``phi`` (rad)."""
+        m, p = self.mirror, self.panorama
+        if m.model == "hyperboloid":
+            return hyperboloid_radius(np.asarray(phi, dtype=float), m.a_m, m.b_m, m.focal_px)
+        return self.radius_of_row(np.asarray(row_of_elevation(phi, p.height, self.top,
+                                                              self.bottom)))
+
+    def elevation_of_radius(self, r: np.ndarray) -> np.ndarray:
+        """Elevation (rad) imaged at radius ``r`` (px)."""
+        m, p = self.mirror, self.panorama
+        if m.model == "hyperboloid":
+            return hyperboloid_elevation(np.asarray(r, dtype=float), m.a_m, m.b_m, m.focal_px)
+        return np.asarray(elevation_of_row(self.row_of_radius(r), p.height, self.top,
+                                           self.bottom))
+
     def image_angle(self, bearing: np.ndarray) -> np.ndarray:
         sign = -1.0 if self.mirror.mirrored else 1.0
         return sign * np.asarray(bearing, dtype=float) + self.mirror.bearing_offset_rad
@@ -82,6 +141,26 @@ class MirrorModel:
         u = self.mirror.center_x_px + r * np.cos(alpha)
         v = self.mirror.center_y_px - r * np.sin(alpha)
         return u, v
+
+    def point_of_direction(self, bearing: np.ndarray, elevation: np.ndarray
+                           ) -> tuple[np.ndarray, np.ndarray]:
+        """Raw image (u, v) in pixels of the world direction (bearing, elevation), both in
+        radians in the robot frame (bearing CCW from the forward axis)."""
+        r = self.radius_of_elevation(elevation)
+        alpha = self.image_angle(bearing)
+        return (self.mirror.center_x_px + r * np.cos(alpha),
+                self.mirror.center_y_px - r * np.sin(alpha))
+
+    def direction_of_point(self, u: np.ndarray, v: np.ndarray
+                           ) -> tuple[np.ndarray, np.ndarray]:
+        """Inverse of :meth:`point_of_direction`: (bearing in (−π, π], elevation) in radians
+        of raw image point (u, v); the elevation is NaN where the pixel misses the mirror."""
+        du = np.asarray(u, dtype=float) - self.mirror.center_x_px
+        dv = self.mirror.center_y_px - np.asarray(v, dtype=float)
+        bearing = self.bearing_of_image_angle(np.arctan2(dv, du))
+        bearing = np.mod(bearing + math.pi, 2.0 * math.pi) - math.pi
+        bearing = np.where(bearing == -math.pi, math.pi, bearing)
+        return bearing, self.elevation_of_radius(np.hypot(du, dv))
 
     def row_radius_range(self) -> tuple[float, float]:
         """Image radii of the bottom and top panorama rows (for checks and rendering)."""

@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 
 from daemon.vision.mirror import MirrorModel
-from daemon.vision.panorama import bearing_of_column, elevation_of_row
+from daemon.vision.panorama import bearing_of_column, elevation_of_row, geometry_checksum
 from daemon.vision.settings import MirrorSettings, PanoramaSettings
 
 
@@ -42,6 +42,11 @@ class Unwarper:
                              f"{raw.shape}")
         return cv2.remap(raw, self._map1, self._map2, interpolation=cv2.INTER_LINEAR,
                          borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+
+    def geometry_checksum(self) -> str:
+        """Digest of the mirror and panorama settings that define this panorama geometry
+        (stored with a map, SPEC §6)."""
+        return geometry_checksum(self.mirror, self.panorama)
 
     def floor_distance_of_rows(self) -> np.ndarray:
         """Horizontal distance (m) to the floor point seen by each row; inf at or above the
