@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from statistics import NormalDist
 
 import cv2
 import numpy as np
@@ -269,29 +270,29 @@ class Renderer:
             order = np.argsort(radii)
             row = (np.interp(r, radii[order], rows[order]) + 0.5) * (
                 self._band_rows / self.pano.height) - 0.5
-        # Two extra band rows hold the camera body (inside r_inner) and black (outside
-        # r_outer), so one remap draws the whole raw image, edges blended by interpolation.
-        row = np.where(r < m.r_inner_px, self._band_rows + 0.5, row)
-        row = np.where(r > m.r_outer_px, self._band_rows + 1.5, row)
-        self._noise_bank: np.ndarray | None = None
+        # Three extra band rows: the camera body (row band_rows, seen inside r_inner) and
+        # black (the last row, outside r_outer; BORDER_WRAP also blends it into the rim at
+        # row -0.5). Whole row numbers, so the camera body is not mixed with black.
+        row = np.where(r < m.r_inner_px, float(self._band_rows), row)
+        row = np.where(r > m.r_outer_px, self._band_rows + 2.0, row)
         self._map_x = np.asarray(col, np.float32)
         self._map_y = np.asarray(row, np.float32)
 
     NOISE_FIXED_POINT = 16.0
+    # N(0, 1) quantiles at the centres of 65536 equal-probability bins, in fixed point: a
+    # uniform 16-bit index into this table is a Gaussian sample (tails cut at 4.3 sigma).
+    _GAUSS_TABLE = np.round(
+        np.array([NormalDist().inv_cdf((k + 0.5) / 65536) for k in range(65536)])
+        * NOISE_FIXED_POINT).astype(np.int16)
 
     def _add_noise(self, raw: np.ndarray, sigma: float, rng: np.random.Generator
                    ) -> np.ndarray:
-        """Gaussian sensor noise, independent per pixel and channel. Drawing ~1M normals
-        per frame would halve the frame rate, so a bank of two frames' worth of N(0, 1)
-        samples is drawn once from ``rng`` and each frame takes a window at a random offset
-        (also from ``rng``): every pixel still gets N(0, sigma²) noise, and consecutive
-        frames get different noise."""
-        n = raw.size
-        if self._noise_bank is None or self._noise_bank.size < 2 * n:
-            bank = rng.standard_normal(2 * n, dtype=np.float32) * self.NOISE_FIXED_POINT
-            self._noise_bank = np.round(bank).astype(np.int16)
-        offset = int(rng.integers(0, n))
-        noise = self._noise_bank[offset: offset + n].reshape(raw.shape)
+        """Gaussian sensor noise N(0, sigma²), independent per pixel, channel and frame, all
+        drawn from ``rng``. Drawing float normals costs ~8 ms a frame; uniform bytes looked
+        up in an inverse-CDF table cost ~2 ms, with the same distribution (to 1/16 grey
+        level and 4.3 sigma)."""
+        index = np.frombuffer(rng.bytes(2 * raw.size), np.uint16)
+        noise = np.take(self._GAUSS_TABLE, index).reshape(raw.shape)
         return np.asarray(cv2.addWeighted(raw, 1.0, noise, sigma / self.NOISE_FIXED_POINT, 0.0,
                                           dtype=cv2.CV_8U))
 
