@@ -11,7 +11,7 @@ import pytest
 
 from daemon.errors import LearningAbortedError, LearningError
 from daemon.mapping.settings import TblSettings
-from daemon.mapping.tbl import Progress, cross_legs
+from daemon.mapping.tbl import Progress, _zoom, cross_legs
 from daemon.service.learning import learn_place
 from daemon.vision.unwarp import Unwarper
 from hal.registry import HalContext, create_base, create_camera
@@ -35,6 +35,15 @@ def test_cross_is_out_and_back_along_both_axes() -> None:
     assert [(dx, dy) for _, dx, dy in legs] == [
         (0.5, 0.0), (-0.5, 0.0), (-0.5, 0.0), (0.5, 0.0),
         (0.0, 0.5), (0.0, -0.5), (0.0, -0.5), (0.0, 0.5)]
+
+
+def test_zoom_of_a_wall_landmark_seen_from_the_cross() -> None:
+    wall = (0.7, math.pi / 2)  # 0.7 m to the left
+    assert _zoom(*wall, (0.0, 0.0, 0.0)) == pytest.approx(1.0)
+    assert _zoom(*wall, (0.0, 0.35, 0.0)) == pytest.approx(2.0)  # half way to the wall
+    assert _zoom(*wall, (0.0, -0.7, 0.0)) == pytest.approx(0.5)
+    assert _zoom(*wall, (0.5, 0.0, 0.0)) == pytest.approx(0.7 / math.hypot(0.5, 0.7))
+    assert _zoom(math.inf, 0.0, (0.5, 0.0, 0.0)) == 1.0  # unresolved: no gating
 
 
 def test_learning_in_the_artificial_corridor() -> None:

@@ -23,6 +23,11 @@ class TblSettings:
         "the reference panorama at a known pose, to a fraction of a column")
     heading_noise_per_m: float = setting(0.02, ge=0.0, le=1.0,
                                          doc="EKF odometry heading noise gained per metre")
-    observation_inflation: float = setting(
-        2.0, ge=1.0, le=100.0, doc="EKF: one frame's bearing counts as 1/this of an "
-        "independent observation (successive frames' errors are correlated)")
+    observation_variance_scale: float = setting(
+        0.7, gt=0.0, le=100.0, doc="EKF: the thesis's NCC noise model σ² = ((1 − c)π + "
+        "π/180)² (§4.6.2) times this; 0.7 keeps the 2-sigma coverage honest in "
+        "`placecell-eval depth` (corridor and room)")
+    max_zoom: float = setting(
+        1.5, ge=1.0, le=100.0, doc="EKF: bearings are used only while the landmark appears "
+        "at most this much larger or smaller than in the reference (template matching is not "
+        "scale invariant: beyond it a track slides off, §4.6.4)")

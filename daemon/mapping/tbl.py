@@ -6,6 +6,9 @@ whether the current move is done, and it tells which move to command next. It tr
 every candidate with NCC around the position predicted from the EKF's pose and the
 candidate's depth, feeds the bearings to the depth EKF (§4.6), scores each candidate by
 its mean NCC, and in the end keeps the best ``keep`` with their depths and covariances.
+A bearing feeds the EKF only while the landmark looks about as large as in the reference
+(``max_zoom``): approaching a wall 3x closer, a template slides off its point yet still
+matches well.
 No device, no clock: the runner (daemon/service/learning.py) does the I/O.
 """
 
@@ -68,7 +71,7 @@ class TurnBackAndLook:
         self.ekf = BearingOnlyEKF(bearings, initial_depth=settings.initial_depth_m,
                                   bearing_sigma=math.radians(settings.reference_bearing_sigma_deg),
                                   heading_noise_per_m=settings.heading_noise_per_m,
-                                  observation_inflation=settings.observation_inflation)
+                                  observation_variance_scale=settings.observation_variance_scale)
         self.templates = self.candidates.templates()
         self.cols = self.candidates.cols().astype(float)
         self.rows = self.candidates.rows().astype(float)
@@ -102,15 +105,17 @@ class TurnBackAndLook:
         self._predict(odometry)
         grey = to_grey(panorama)
         pose = self.ekf.pose
-        predicted = np.array([predict_column(self.ekf.estimate(i).bearing,
-                                             min(self.ekf.estimate(i).depth, 50.0), pose,
-                                             self.width)
-                              for i in range(len(self.templates))])
+        estimates = [self.ekf.estimate(i) for i in range(len(self.templates))]
+        predicted = np.array([predict_column(e.bearing, min(e.depth, 50.0), pose, self.width)
+                              for e in estimates])
+        zoom = np.array([_zoom(e.depth, e.bearing, pose) for e in estimates])
         result = track(grey, self.margin, self.templates, predicted, self.rows,
                        self.settings.search_cols, self.settings.search_rows)
         bearings = column_to_bearing_of_centre(result.cols, self.width)  # robot frame
+        limit = math.log(self.settings.max_zoom)
         for i, (bearing, score) in enumerate(zip(bearings, result.scores, strict=True)):
-            self.ekf.update(i, float(bearing), float(score))
+            if abs(math.log(zoom[i])) <= limit:
+                self.ekf.update(i, float(bearing), float(score))
         self.score_sum += np.maximum(result.scores, 0.0)
         self.rows = result.rows
         self.frames += 1
@@ -141,3 +146,13 @@ class TurnBackAndLook:
                                      covariance=est.covariance, bearing=est.bearing,
                                      score=float(mean_ncc[i])))
         return LandmarkSet(tuple(landmarks), self.width, self.margin)
+
+
+def _zoom(depth: float, bearing: float, pose: tuple[float, float, float]) -> float:
+    """How much larger a landmark at (depth, bearing) of the reference appears from
+    ``pose``: reference distance over current distance (1 for an unresolved one)."""
+    if not math.isfinite(depth) or depth <= 0.0:
+        return 1.0
+    x, y, _ = pose
+    now = math.hypot(depth * math.cos(bearing) - x, depth * math.sin(bearing) - y)
+    return depth / max(now, 1e-3)

@@ -42,7 +42,7 @@ class BearingOnlyEKF:
     def __init__(self, bearings: np.ndarray, *, initial_depth: float = 2.5,
                  inverse_depth_sigma: float = 0.5, bearing_sigma: float = math.radians(1.0),
                  translation_noise: float = 0.01, rotation_noise: float = 0.10,
-                 heading_noise_per_m: float = 0.002, observation_inflation: float = 1.0
+                 heading_noise_per_m: float = 0.002, observation_variance_scale: float = 1.0
                  ) -> None:
         n = len(bearings)
         self.n = n
@@ -55,10 +55,9 @@ class BearingOnlyEKF:
         self.translation_noise = translation_noise  # std per metre travelled
         self.rotation_noise = rotation_noise  # std per radian turned
         self.heading_noise_per_m = heading_noise_per_m  # heading std gained per metre
-        # Successive frames' tracking errors are correlated (the same template seen from
-        # almost the same place): each observation counts as 1/inflation of an
-        # independent one.
-        self.observation_inflation = observation_inflation
+        # The thesis's σ² (§4.6.2) times this: its shape (poor match → ~(π/2)², perfect →
+        # (1°)²) is kept, its scale calibrated so the reported covariances are honest.
+        self.observation_variance_scale = observation_variance_scale
 
     @property
     def pose(self) -> tuple[float, float, float]:
@@ -105,7 +104,7 @@ class BearingOnlyEKF:
         H[2] = -1.0
         H[k] = (-u * y + v * x) / q
         H[k + 1] = (u * math.cos(gamma) + v * math.sin(gamma)) / q
-        R = observation_variance(ncc) * self.observation_inflation
+        R = observation_variance(ncc) * self.observation_variance_scale
         PH = self.P @ H
         S = float(H @ PH) + R
         K = PH / S

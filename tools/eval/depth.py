@@ -32,7 +32,8 @@ ARTIFICIAL = str(Path(__file__).resolve().parents[2] / "config" / "worlds" /
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--artificial", action="store_true",
                    help="the corridor with flat markers 0.7 m away (thesis §4.6.4)")
-    p.add_argument("--places", type=int, default=5, help="places (world seeds) to learn")
+    p.add_argument("--places", type=int, default=10,
+                   help="places to learn (one world seed each; corridor: positions along it)")
 
 
 def _places(args: argparse.Namespace) -> list[tuple[str, tuple[float, float, float]]]:
