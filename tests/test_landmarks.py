@@ -184,3 +184,21 @@ def test_fast_recognition_agrees_with_bruteforce() -> None:
     assert np.allclose(brute, fast, atol=1e-4)
     assert brute[[0, 2, 4]].min() > 0.99  # templates that moved only sideways are found
     assert 0.5 < brute[1] < 0.9  # the one whose rows were cut apart is found worse
+
+
+def test_fast_recognition_of_another_place_never_overestimates() -> None:
+    # Templates of another place: their best NCC is some mediocre window anywhere, the
+    # case where coarse to fine can miss the best peak; it may fall short, never exceed.
+    pano = _textured((120, 752), 21)
+    other = _textured((120, 752), 22)
+    rng = np.random.default_rng(5)
+    corners = zip(rng.integers(0, 104, 32), rng.integers(0, 736, 32), strict=True)
+    templates = np.stack([other[r:r + 16, c:c + 16] for r, c in corners])
+    templates[0] = 77  # a flat template matches nothing
+    brute = best_ncc_bruteforce(pano, templates)
+    fast = FastMatcher().best_ncc(PreparedPanorama.of(pano), PreparedTemplates.of(templates))
+    assert fast[0] == 0.0  # (OpenCV's normalised matchTemplate says 1.0 for a flat one)
+    brute, fast = brute[1:], fast[1:]
+    assert np.all(fast <= brute + 1e-4)
+    assert abs(fast.mean() - brute.mean()) < 0.02  # the LRP agrees
+    assert np.median(brute - fast) < 1e-4  # most maxima are found exactly

@@ -9,7 +9,10 @@ from collections.abc import Callable
 
 
 def pin_to_one_core() -> None:
-    """Run the benchmark on one core (and tell OpenCV to use one thread)."""
+    """Run the benchmark on one core (and tell OpenCV and BLAS to use one thread: BLAS
+    reads its setting when numpy is first imported, so call this before that)."""
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[name] = "1"
     import cv2
 
     cv2.setNumThreads(1)
