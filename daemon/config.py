@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from daemon.errors import ConfigError
+from daemon.mapping.settings import TblSettings
 from daemon.settings import as_dict, build, read_toml, setting
 from daemon.vision.settings import MirrorSettings, PanoramaSettings
 from hal.base.settings import BaseSettings
@@ -70,6 +71,7 @@ class PlacecellConfig:
     mirror: MirrorSettings = setting(default_factory=MirrorSettings)
     panorama: PanoramaSettings = setting(default_factory=PanoramaSettings)
     sim: SimSettings = setting(default_factory=SimSettings)
+    tbl: TblSettings = setting(default_factory=TblSettings)
     zenoh: ZenohSettings = setting(default_factory=ZenohSettings)
     map: MapSettings = setting(default_factory=MapSettings)
     service: ServiceSettings = setting(default_factory=ServiceSettings)

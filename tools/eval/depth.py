@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from daemon.mapping.settings import TblSettings
+from daemon.config import load
 from daemon.vision.landmarks import centre_bearing
 from hal.sim.world import load_world
 from tools.eval.places import learn
@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     return {
         "world": {"kind": "artificial-corridor" if args.artificial else args.world_kind,
                   "seed": args.world_seed},
-        "config": {"places": args.places, "tbl": dataclasses.asdict(TblSettings())},
+        "config": {"places": args.places, "tbl": dataclasses.asdict(load(None).tbl)},
         "metrics": {
             "median_error_m": round(float(np.median(errors)), 4),
             "max_error_m": round(float(np.max(errors)), 4),

@@ -10,7 +10,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from daemon.config import PlacecellConfig, load
-from daemon.mapping.settings import TblSettings
 from daemon.service.learning import learn_place
 from daemon.vision.landmarks import LandmarkSet
 from daemon.vision.selection import select_static
@@ -48,7 +47,7 @@ def learn(world: str, pose: tuple[float, float, float], seed: int,
     full = select_static(p1, p2, margin)
     best = sorted(full.landmarks, key=lambda lm: lm.score, reverse=True)[:16]
     static = LandmarkSet(tuple(best), full.width, margin)
-    tbl = learn_place(camera, base, unwarper, TblSettings())
+    tbl = learn_place(camera, base, unwarper, cfg.tbl)
     assert robot.renderer is not None
     return LearnedPlace(reference, tbl, static, robot.renderer)
 
