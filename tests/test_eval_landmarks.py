@@ -45,12 +45,22 @@ def test_recognise_on_camera_images(tmp_path: Path) -> None:
     assert bad.returncode == 2 and "--mirror" in bad.stderr
 
 
-def test_depth_experiment_prints_its_metrics() -> None:
+def test_depth_experiment_prints_its_metrics_and_draws(tmp_path: Path) -> None:
     out = subprocess.run([venv_bin("placecell-eval"), "depth", "--artificial", "--places", "1",
-                          "--json"], cwd=REPO, capture_output=True, text=True, timeout=300)
+                          "--json", "--plots", str(tmp_path / "figures")], cwd=REPO,
+                         capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     result = json.loads(out.stdout)
     assert result["experiment"] == "depth"
     metrics = result["metrics"]
     assert set(metrics) >= {"median_error_m", "max_error_m", "coverage_2sigma"}
     assert metrics["landmarks"] == 16 and metrics["median_error_m"] < 0.10
+    figure = cv2.imread(str(tmp_path / "figures" / "depth.png"))
+    assert figure is not None and figure.shape == (560, 560, 3)
+    assert (figure < 200).any(axis=2).mean() > 0.01  # points, bars and axes were drawn
+
+
+def test_plots_refused_where_an_experiment_draws_none() -> None:
+    out = subprocess.run([venv_bin("placecell-eval"), "robustness", "--plots", "x"], cwd=REPO,
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "draws no figures" in out.stderr

@@ -1,4 +1,5 @@
-"""``placecell-eval EXPERIMENT [--world-kind K] [--world-seed N] [--seed N] [--json]``
+"""``placecell-eval EXPERIMENT [--world-kind K] [--world-seed N] [--seed N] [--json]
+[--plots DIR]``
 
 Each experiment lives in ``tools/eval/<module>.py`` and provides
 ``add_arguments(parser)`` and ``run(args) -> dict`` returning ``{"metrics": {...},
@@ -38,8 +39,11 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--world-seed", type=int, default=1)
         p.add_argument("--seed", type=int, default=1, help="seed of the experiment's randomness")
         p.add_argument("--json", action="store_true", help="print one JSON object")
+        p.add_argument("--plots", metavar="DIR", help="write PNG figures of the experiment here")
         importlib.import_module(module_name).add_arguments(p)
     args = parser.parse_args(argv)
+    if args.plots and not getattr(importlib.import_module(args._module), "DRAWS_PLOTS", False):
+        parser.error(f"{args.experiment} draws no figures yet: drop --plots")
     logging.basicConfig(level=logging.WARNING if args.json else logging.INFO,
                         format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
     try:

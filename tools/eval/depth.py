@@ -22,9 +22,11 @@ import numpy as np
 from daemon.config import load
 from daemon.vision.landmarks import centre_bearing
 from hal.sim.world import load_world
+from tools.eval import plots
 from tools.eval.places import learn
 from tools.eval.truth import landmark_depth
 
+DRAWS_PLOTS = True  # --plots DIR: depth.png, estimate against truth with 2-sigma bars
 ARTIFICIAL = str(Path(__file__).resolve().parents[2] / "config" / "worlds" /
                  "artificial-corridor.toml")
 
@@ -48,6 +50,7 @@ def _places(args: argparse.Namespace) -> list[tuple[str, tuple[float, float, flo
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     errors, inside, far, near_errors = [], [], 0, []
+    plotted: list[tuple[float, float, float]] = []  # (truth, estimate, 2 sigma)
     for world, pose in _places(args):
         place = learn(world, pose, args.seed)
         landmarks, reference = place.tbl, place.pose
@@ -61,14 +64,22 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 continue
             error = lm.depth - truth
             errors.append(abs(error))
+            plotted.append((truth, lm.depth, 2.0 * math.sqrt(lm.covariance[0, 0])))
             if truth <= 1.0:  # SPEC §3.3: ±0.1 m expected for landmarks within ~1 m
                 near_errors.append(abs(error))
             # Inside the 2-sigma ellipse of the (d, γ) covariance: Mahalanobis distance <= 2
             # (a perfect Gaussian: 1 − e^−2 = 86 %).
             diff = np.array([error, math.remainder(lm.bearing - true_bearing, 2 * math.pi)])
             inside.append(float(diff @ np.linalg.solve(lm.covariance, diff)) <= 4.0)
+    world_kind = "artificial-corridor" if args.artificial else args.world_kind
+    if args.plots:
+        truths, estimates, bars = (np.array(v) for v in zip(*plotted, strict=True))
+        plots.scatter(Path(args.plots) / "depth.png", truths, estimates, bars,
+                      title=f"TBL depth in {world_kind}: estimate (2-sigma bar) vs truth",
+                      x_label="true depth (m)", y_label="estimate (m)",
+                      limit=float(min(max(truths.max(), 1.0) * 1.1, 12.0)))
     return {
-        "world": {"kind": "artificial-corridor" if args.artificial else args.world_kind,
+        "world": {"kind": world_kind,
                   "seed": args.world_seed},
         "config": {"places": args.places, "tbl": dataclasses.asdict(load(None).tbl)},
         "metrics": {

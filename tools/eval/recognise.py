@@ -29,6 +29,7 @@ from daemon.vision.settings import MirrorSettings
 from daemon.vision.unwarp import Unwarper
 
 KEEP = 16
+DRAWS_PLOTS = True  # --plots DIR: the landmarks drawn on each panorama
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -37,7 +38,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--images", nargs="+", required=True, help="raw images to recognise in")
     p.add_argument("--mirror", default="auto",
                    help="auto (detect from A) or CX,CY,R_IN,R_OUT in pixels")
-    p.add_argument("--plots", metavar="DIR", help="draw the landmarks on the panoramas")
 
 
 def _read(path: str) -> np.ndarray:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -25,8 +26,10 @@ from daemon.vision.panorama import to_grey
 from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
 from daemon.vision.unwarp import Unwarper
 from hal.sim.world import load_world
+from tools.eval import plots
 from tools.eval.places import LearnedPlace, learn, view
 
+DRAWS_PLOTS = True  # --plots DIR: range-NN-{tbl,static}.png, the LRP grid of each place
 STEP = 0.25
 REACH = 2.0
 MARGIN = 0.05
@@ -83,19 +86,24 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         background = {name: float(np.median([matcher.lrp(p, t) for p in far]))
                       for name, t in prepared.items()}
         x0, y0, yaw = place.pose
-        counts = {"tbl": 0, "static": 0}
         offsets = np.arange(-REACH, REACH + 1e-9, STEP)
-        for dx in offsets:
-            for dy in offsets:
+        lrp = {name: np.full((len(offsets), len(offsets)), np.nan) for name in prepared}
+        for j, dx in enumerate(offsets):
+            for i, dy in enumerate(offsets):
                 x, y = x0 + dx, y0 + dy
                 if not _free(place, x, y):
                     continue
                 pano = PreparedPanorama.of(to_grey(view(place, unwarper, (x, y, yaw), rng)))
                 for name, t in prepared.items():
-                    if matcher.lrp(pano, t) > background[name] + MARGIN:
-                        counts[name] += 1
-        for name in counts:
-            areas[name].append(counts[name] * STEP * STEP)
+                    lrp[name][i, j] = matcher.lrp(pano, t)
+        for name, values in lrp.items():
+            recognised = np.nan_to_num(values, nan=-1.0) > background[name] + MARGIN
+            areas[name].append(int(recognised.sum()) * STEP * STEP)
+            if args.plots:
+                plots.grid(Path(args.plots) / f"range-{len(areas[name]) - 1:02d}-{name}.png",
+                           values, recognised, title=f"{world}: LRP of the {name} set "
+                           f"(background {background[name]:.2f})", lo=background[name] - 0.1,
+                           hi=float(np.nanmax(values)), cell_m=STEP)
     return {
         "world": {"kind": kind, "seed": args.world_seed},
         "config": {"places": args.places, "grid_step_m": STEP, "reach_m": REACH,
