@@ -30,4 +30,5 @@ class TblSettings:
     max_zoom: float = setting(
         1.5, ge=1.0, le=100.0, doc="EKF: bearings are used only while the landmark appears "
         "at most this much larger or smaller than in the reference (template matching is not "
-        "scale invariant: beyond it a track slides off, §4.6.4)")
+        "scale invariant: beyond it a track slides off; the thesis shortened its cross toward "
+        "the corridor walls, §4.6.4)")

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from daemon.config import load
+from daemon.errors import PlacecellError
 from daemon.vision.landmarks import LandmarkSet
 from daemon.vision.panorama import to_grey
 from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
@@ -80,7 +81,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         far = [PreparedPanorama.of(to_grey(view(place, unwarper, pose, rng)))
                for pose in _far_poses(place, world, rng)]
         if not far:
-            raise SystemExit(f"{world}: no free pose beyond {REACH + 0.5} m of the place "
+            raise PlacecellError(f"{world}: no free pose beyond {REACH + 0.5} m of the place "
                              "to measure the background LRP at")
         far_counts.append(len(far))
         background = {name: float(np.median([matcher.lrp(p, t) for p in far]))
