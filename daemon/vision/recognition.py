@@ -121,7 +121,8 @@ class PreparedTemplates:
 class FastMatcher:
     """Best NCC of many templates in one panorama, coarse to fine (module docstring)."""
 
-    CANDIDATE_MARGIN = 0.2  # coarse peaks this close to the coarse best are refined
+    # A coarse peak is refined when within this x the template's detail of its coarse best.
+    CANDIDATE_MARGIN = 0.2
     _PEAK = np.ones((3, 3), np.uint8)
 
     def best_ncc(self, pano: PreparedPanorama, templates: PreparedTemplates) -> np.ndarray:
