@@ -122,7 +122,7 @@ class FastMatcher:
     """Best NCC of many templates in one panorama, coarse to fine (module docstring)."""
 
     # A coarse peak is refined when within this x the template's detail of its coarse best.
-    CANDIDATE_MARGIN = 0.2
+    CANDIDATE_MARGIN = 0.3
     _PEAK = np.ones((3, 3), np.uint8)
 
     def best_ncc(self, pano: PreparedPanorama, templates: PreparedTemplates) -> np.ndarray:
@@ -144,7 +144,7 @@ class FastMatcher:
         chosen = usable[which]
         _refine(pano.image, pano.window_norm, templates.zero_mean, templates.norms,
                 which[chosen].astype(np.int64), 2 * (at[chosen] // w).astype(np.int64),
-                2 * (at[chosen] % w).astype(np.int64), floor, out)
+                2 * (at[chosen] % w).astype(np.int64), floor, TEMPLATE, out)
         found_any = np.where(out < -1.5, 0.0, out).astype(np.float64)
         return np.clip(found_any, -1.0, 1.0)  # float32 rounding can pass 1 by 1e-7
 
@@ -154,29 +154,35 @@ class FastMatcher:
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
 def _block(pixels: np.ndarray, width: int, window_norm: np.ndarray, weights: np.ndarray,
-           norm: float, r0: int, c0: int, floor: float, acc: np.ndarray
+           norm: float, r0: int, c0: int, floor: float, side: int, acc: np.ndarray
            ) -> None:  # pragma: no cover (compiled)
     """Exact NCC = Σ (T − T̄) I / (||T − T̄|| · ||I − Ī||) at the 3 x 3 positions from
-    (r0, c0) into ``acc`` (as OpenCV's; a window flatter than ``floor`` counts as 0)."""
-    acc[:] = 0.0
-    for u in range(TEMPLATE):  # the 3 x 3 positions share one 18 x 18 patch
-        for dr in range(3):
-            start = (r0 + dr + u) * width + c0
-            for dc in range(3):
-                s = np.float32(0.0)
-                for v in range(TEMPLATE):
-                    s += weights[u * TEMPLATE + v] * pixels[start + dc + v]
-                acc[dr, dc] += s
+    (r0, c0) into ``acc`` (as OpenCV's; a window flatter than ``floor`` counts as 0).
+
+    ``side`` (the template's, 16) comes in at run time on purpose: LLVM then vectorises
+    the inner loop's three running sums; with a compile-time 16 it unrolls the loop into
+    scalar code 2.5x slower."""
     for dr in range(3):
-        for dc in range(3):
+        s0, s1, s2 = np.float32(0.0), np.float32(0.0), np.float32(0.0)
+        for u in range(side):  # the 3 positions of a row share one 18-pixel line
+            start = (r0 + dr + u) * width + c0
+            row = weights[u * side:(u + 1) * side]
+            p0 = pixels[start:start + side]
+            p1 = pixels[start + 1:start + 1 + side]
+            p2 = pixels[start + 2:start + 2 + side]
+            for v in range(side):
+                s0 += row[v] * p0[v]
+                s1 += row[v] * p1[v]
+                s2 += row[v] * p2[v]
+        for dc, s in enumerate((s0, s1, s2)):
             energy = window_norm[r0 + dr, c0 + dc]
-            acc[dr, dc] = acc[dr, dc] / (energy * norm) if energy > floor else 0.0
+            acc[dr, dc] = s / (energy * norm) if energy > floor else 0.0
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
 def _refine(image: np.ndarray, window_norm: np.ndarray, templates: np.ndarray,
             norms: np.ndarray, which: np.ndarray, rows: np.ndarray, cols: np.ndarray,
-            floor: float, out: np.ndarray) -> None:  # pragma: no cover (compiled)
+            floor: float, side: int, out: np.ndarray) -> None:  # pragma: no cover (compiled)
     """From each coarse candidate k (template ``which[k]`` at the even position
     (rows[k], cols[k])), climb the exact NCC at full resolution: evaluate the 3 x 3
     positions around the current one and move to the best until it is the centre (a
@@ -192,7 +198,7 @@ def _refine(image: np.ndarray, window_norm: np.ndarray, templates: np.ndarray,
         r, c = rows[k], cols[k]
         for _ in range(8):  # a few steps reach the local maximum
             r0, c0 = min(max(r - 1, 0), h - 3), min(max(c - 1, 0), w - 3)
-            _block(pixels, width, window_norm, weights[i], norms[i], r0, c0, floor, acc)
+            _block(pixels, width, window_norm, weights[i], norms[i], r0, c0, floor, side, acc)
             best = np.argmax(acc)
             br, bc = r0 + best // 3, c0 + best % 3
             out[i] = max(out[i], acc[best // 3, best % 3])
