@@ -202,3 +202,22 @@ def test_fast_recognition_of_another_place_never_overestimates() -> None:
     assert np.all(fast <= brute + 1e-4)
     assert abs(fast.mean() - brute.mean()) < 0.02  # the LRP agrees
     assert np.median(brute - fast) < 1e-4  # most maxima are found exactly
+
+
+def test_exact_ncc_block_matches_opencv() -> None:
+    # The climb's compiled 3 x 3 block must give OpenCV's NCC wherever it is placed,
+    # up to the last window of the panorama.
+    from daemon.vision.recognition import FLAT_RMS, _block
+
+    pano = _textured((120, 752), 31)
+    prepared = PreparedPanorama.of(pano)
+    template = PreparedTemplates.of(pano[60:76, 200:216][None])
+    reference = ncc_map(pano, pano[60:76, 200:216])
+    acc = np.empty((3, 3), np.float32)
+    h, w = prepared.window_norm.shape
+    for r0, c0 in [(59, 199), (0, 0), (h - 3, w - 3), (17, 401)]:
+        _block(prepared.image.ravel(), pano.shape[1], prepared.window_norm,
+               template.zero_mean[0].ravel(), float(template.norms[0]), r0, c0,
+               FLAT_RMS * TEMPLATE, TEMPLATE, acc)
+        assert np.allclose(acc, reference[r0:r0 + 3, c0:c0 + 3], atol=1e-4)
+    assert acc.max() < 0.9 and reference[60, 200] > 0.999  # not a trivially equal map
