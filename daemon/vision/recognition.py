@@ -144,7 +144,8 @@ class FastMatcher:
         chosen = usable[which]
         _refine(pano.image, pano.window_norm, templates.zero_mean, templates.norms,
                 which[chosen].astype(np.int64), 2 * (at[chosen] // w).astype(np.int64),
-                2 * (at[chosen] % w).astype(np.int64), floor, TEMPLATE, out)
+                2 * (at[chosen] % w).astype(np.int64), floor,
+                TEMPLATE, out)  # the side from Python, not a constant inside: see _block
         found_any = np.where(out < -1.5, 0.0, out).astype(np.float64)
         return np.clip(found_any, -1.0, 1.0)  # float32 rounding can pass 1 by 1e-7
 
