@@ -46,6 +46,12 @@ class LandmarkSet:
     def cols(self) -> np.ndarray:
         return np.array([lm.col for lm in self.landmarks])
 
+    def best(self, count: int) -> LandmarkSet:
+        """The ``count`` landmarks with the highest score (e.g. the 16 best of a static
+        selection), best first."""
+        ranked = sorted(self.landmarks, key=lambda lm: lm.score, reverse=True)
+        return LandmarkSet(tuple(ranked[:count]), self.width, self.margin)
+
 
 def centre_bearing(col: float, width: int) -> float:
     """Bearing of the centre of a template whose left core column is ``col``."""

@@ -52,9 +52,7 @@ def map_and_path() -> tuple[list[LandmarkSet], list[np.ndarray], np.ndarray, int
     places = []  # along the office's corridor, about 0.5 m apart
     for x in np.linspace(2.0, 28.0, PLACES):
         pose = (float(x), 10.0, 0.0)
-        full = select_static(pano(pose), pano(pose), margin)
-        best = sorted(full.landmarks, key=lambda lm: lm.score, reverse=True)[:16]
-        places.append(LandmarkSet(tuple(best), full.width, margin))
+        places.append(select_static(pano(pose), pano(pose), margin).best(16))
     # The path: down the corridor, weaving 0.2 m sideways and turning up to ±0.4 rad.
     xs = np.linspace(2.1, 27.9, FRAMES)
     frames = [to_grey(pano((float(x), 10.0 + 0.2 * math.sin(1.3 * x), 0.4 * math.sin(0.7 * x))))

@@ -44,9 +44,7 @@ def learn(world: str, pose: tuple[float, float, float], seed: int,
     # frames at the reference give the same statistics.
     p1 = unwarper.unwarp(robot.render_frame().image)
     p2 = unwarper.unwarp(robot.render_frame().image)
-    full = select_static(p1, p2, margin)
-    best = sorted(full.landmarks, key=lambda lm: lm.score, reverse=True)[:16]
-    static = LandmarkSet(tuple(best), full.width, margin)
+    static = select_static(p1, p2, margin).best(16)
     tbl = learn_place(camera, base, unwarper, cfg.tbl)
     assert robot.renderer is not None
     return LearnedPlace(reference, tbl, static, robot.renderer)

@@ -72,9 +72,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     unwarper = Unwarper(mirror, config.panorama)
     margin = config.panorama.wrap_margin
     pano_a, pano_b = unwarper.unwarp(ref_a), unwarper.unwarp(ref_b)
-    selected = select_static(pano_a, pano_b, margin)
-    best = sorted(selected.landmarks, key=lambda lm: lm.score, reverse=True)[:KEEP]
-    landmarks = LandmarkSet(tuple(best), selected.width, margin)
+    landmarks = select_static(pano_a, pano_b, margin).best(KEEP)
     lrps, panoramas = [], []
     for path in args.images:
         pano = unwarper.unwarp(_read(path))
@@ -84,7 +82,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         _plot(Path(args.plots), [pano_a, *panoramas], ["reference", *args.images], landmarks)
     return {
         "world": {"kind": "real images", "seed": None},
-        "config": {"mirror": dataclasses.asdict(mirror), "landmarks": len(best)},
+        "config": {"mirror": dataclasses.asdict(mirror), "landmarks": len(landmarks.landmarks)},
         "metrics": {"lrp": lrps, "images": list(args.images),
                     "mirror": {"center_x_px": mirror.center_x_px,
                                "center_y_px": mirror.center_y_px,
