@@ -122,7 +122,7 @@ class FastMatcher:
     """Best NCC of many templates in one panorama, coarse to fine (module docstring)."""
 
     # A coarse peak is refined when within this x the template's detail of its coarse best.
-    CANDIDATE_MARGIN = 0.3
+    CANDIDATE_MARGIN = 0.25
     _PEAK = np.ones((3, 3), np.uint8)
 
     def best_ncc(self, pano: PreparedPanorama, templates: PreparedTemplates) -> np.ndarray:
