@@ -60,6 +60,25 @@ def test_depth_experiment_prints_its_metrics_and_draws(tmp_path: Path) -> None:
     assert (figure < 200).any(axis=2).mean() > 0.01  # points, bars and axes were drawn
 
 
+def test_recognition_range_compares_selections_and_explains(tmp_path: Path) -> None:
+    out = subprocess.run([venv_bin("placecell-eval"), "recognition-range", "--places", "1",
+                          "--json", "--plots", str(tmp_path / "figures")], cwd=REPO,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    metrics = json.loads(out.stdout)["metrics"]
+    # Both sets are recognised around their own reference, not everywhere on the grid.
+    grid_area = (2 * 2.0) ** 2
+    for name in ("tbl", "static"):
+        assert 0.5 < metrics[f"{name}_area_m2"] < grid_area
+    assert metrics["oracle_area_m2"] >= 0.5
+    correlation = metrics["candidate_usefulness_correlation"]
+    assert set(correlation) == {"tbl_score", "valley_r"}
+    assert all(-1.0 <= c <= 1.0 for c in correlation.values())
+    assert correlation["valley_r"] > 0.2  # distinct templates do stand out from the room
+    assert sorted(p.name for p in (tmp_path / "figures").glob("*.png")) == [
+        "range-00-static.png", "range-00-tbl.png"]
+
+
 def test_plots_refused_where_an_experiment_draws_none() -> None:
     out = subprocess.run([venv_bin("placecell-eval"), "robustness", "--plots", "x"], cwd=REPO,
                          capture_output=True, text=True, timeout=60)

@@ -12,7 +12,7 @@ import pytest
 from daemon.errors import LearningAbortedError, LearningError
 from daemon.mapping.settings import TblSettings
 from daemon.mapping.tbl import Progress, _zoom, cross_legs
-from daemon.service.learning import learn_place
+from daemon.service.learning import learn_place, run_tbl
 from daemon.vision.unwarp import Unwarper
 from hal.registry import HalContext, create_base, create_camera
 from hal.sim.factory import shared_sim_robot
@@ -50,9 +50,18 @@ def test_learning_in_the_artificial_corridor() -> None:
     config = lockstep_config(world=CORRIDOR, start_pose=[0.0, 0.0, 0.0])
     camera, base, robot = _devices(config)
     seen: list[Progress] = []
-    landmarks = learn_place(camera, base, Unwarper(config.mirror, config.panorama),
-                            TblSettings(), progress=seen.append)
-    assert len(landmarks.landmarks) == 16
+    tbl = run_tbl(camera, base, Unwarper(config.mirror, config.panorama), TblSettings(),
+                  progress=seen.append)
+    landmarks, scored = tbl.result(), tbl.scored()
+    assert len(landmarks.landmarks) == 16 and len(scored.landmarks) == 32
+    # The place keeps the 16 candidates with the highest mean NCC, depths and all.
+    kept = {(lm.row, lm.col): lm for lm in landmarks.landmarks}
+    dropped = [lm.score for lm in scored.landmarks if (lm.row, lm.col) not in kept]
+    assert len(dropped) == 16 and min(lm.score for lm in kept.values()) >= max(dropped)
+    assert all(kept[lm.row, lm.col].depth == lm.depth for lm in scored.landmarks
+               if (lm.row, lm.col) in kept)
+    assert [lm.bearing for lm in landmarks.landmarks] == sorted(
+        lm.bearing for lm in landmarks.landmarks)
     assert seen[-1] == Progress("done", 1.0)
     assert [p.fraction for p in seen] == sorted(p.fraction for p in seen)
     x, y, yaw = robot.true_pose()

@@ -132,20 +132,25 @@ class TurnBackAndLook:
         self.ekf.predict(c * gx + s * gy, -s * gx + c * gy, dyaw)
         self._last_odometry = b
 
-    def result(self) -> LandmarkSet:
-        """The ``keep`` most reliable landmarks (mean NCC over the cross, §4.3) with their
-        depth estimates (§4.6)."""
+    def scored(self) -> LandmarkSet:
+        """Every candidate, in selection order, scored by its mean NCC over the cross
+        (§4.3) and carrying its depth estimate (§4.6)."""
         if not self.done or self.frames == 0:
             raise LearningError("Turn Back and Look has not finished")
         mean_ncc = self.score_sum / self.frames
-        best = np.argsort(mean_ncc)[::-1][: self.settings.keep]
         landmarks = []
-        for i in sorted(best, key=lambda k: self.candidates.landmarks[k].bearing):
-            est = self.ekf.estimate(int(i))
-            landmarks.append(replace(self.candidates.landmarks[int(i)], depth=est.depth,
-                                     covariance=est.covariance, bearing=est.bearing,
-                                     score=float(mean_ncc[i])))
+        for i, candidate in enumerate(self.candidates.landmarks):
+            est = self.ekf.estimate(i)
+            landmarks.append(replace(candidate, depth=est.depth, covariance=est.covariance,
+                                     bearing=est.bearing, score=float(mean_ncc[i])))
         return LandmarkSet(tuple(landmarks), self.width, self.margin)
+
+    def result(self) -> LandmarkSet:
+        """The place's landmark set: the ``keep`` most reliable candidates (highest mean
+        NCC, §4.3) with their depths, in bearing order."""
+        best = self.scored().best(self.settings.keep)
+        by_bearing = tuple(sorted(best.landmarks, key=lambda lm: lm.bearing))
+        return replace(best, landmarks=by_bearing)
 
 
 def _zoom(depth: float, bearing: float, pose: tuple[float, float, float]) -> float:

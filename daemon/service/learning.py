@@ -52,7 +52,15 @@ class _Sensors:
 def learn_place(camera: Any, base: Any, unwarper: Unwarper, settings: TblSettings, *,
                 progress: ProgressCallback | None = None,
                 abort: threading.Event | None = None) -> LandmarkSet:
-    """Turn Back and Look at the current pose; returns the place's landmark set.
+    """Turn Back and Look at the current pose; returns the place's landmark set."""
+    return run_tbl(camera, base, unwarper, settings, progress=progress, abort=abort).result()
+
+
+def run_tbl(camera: Any, base: Any, unwarper: Unwarper, settings: TblSettings, *,
+            progress: ProgressCallback | None = None,
+            abort: threading.Event | None = None) -> TurnBackAndLook:
+    """Drive the whole cross; returns the finished state machine (its result, and for
+    evaluation every scored candidate).
 
     Refuses (LearningError) when the base cannot move or frames stop arriving; on
     ``abort`` the robot is stopped and LearningAbortedError raised (nothing is stored)."""
@@ -91,7 +99,7 @@ def learn_place(camera: Any, base: Any, unwarper: Unwarper, settings: TblSetting
     except (LearningError, HalError):
         _stop(base)
         raise
-    return tbl.result()
+    return tbl
 
 
 def _stop(base: Any) -> None:

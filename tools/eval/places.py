@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from daemon.config import PlacecellConfig, load
-from daemon.service.learning import learn_place
+from daemon.service.learning import run_tbl
 from daemon.vision.landmarks import LandmarkSet
 from daemon.vision.selection import select_static
 from daemon.vision.unwarp import Unwarper
@@ -25,6 +25,8 @@ class LearnedPlace:
     tbl: LandmarkSet  # Turn Back and Look: 16 landmarks with depths
     static: LandmarkSet  # the 16 best of static selection alone, same reference
     renderer: Renderer
+    candidates: LandmarkSet  # all TBL candidates, scored by mean NCC over the cross
+    candidate_valley: np.ndarray  # their valley measure r from static selection, same order
 
 
 def learn(world: str, pose: tuple[float, float, float], seed: int,
@@ -45,9 +47,10 @@ def learn(world: str, pose: tuple[float, float, float], seed: int,
     p1 = unwarper.unwarp(robot.render_frame().image)
     p2 = unwarper.unwarp(robot.render_frame().image)
     static = select_static(p1, p2, margin).best(16)
-    tbl = learn_place(camera, base, unwarper, cfg.tbl)
+    tbl = run_tbl(camera, base, unwarper, cfg.tbl)
     assert robot.renderer is not None
-    return LearnedPlace(reference, tbl, static, robot.renderer)
+    return LearnedPlace(reference, tbl.result(), static, robot.renderer, tbl.scored(),
+                        np.array([lm.score for lm in tbl.candidates.landmarks]))
 
 
 def view(place: LearnedPlace, unwarper: Unwarper, pose: tuple[float, float, float],

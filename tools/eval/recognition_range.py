@@ -9,6 +9,12 @@ background LRP + 0.05. The background is what the thesis calls it (§7.1): the l
 LRP settles at away from the place, in the same surroundings — the median LRP of the set
 at free poses of the same world beyond the grid (more than ``REACH`` + 0.5 m away). The
 recognised area is reported for both selections.
+
+Why one selection wins is measured too: for each of the place's TBL candidates, its
+usefulness — how far its own best NCC stands above its own background (median at the far
+poses), averaged over the grid — and the rank correlation of each selection score (TBL's
+mean NCC, static selection's valley measure r) with that usefulness; and, as a bound
+rather than a method, the area of the 16 candidates that proved most useful.
 """
 
 from __future__ import annotations
@@ -75,20 +81,25 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     rng = np.random.default_rng(args.seed)
     areas: dict[str, list[float]] = {"tbl": [], "static": []}
     far_counts = []
+    correlation: dict[str, list[float]] = {"tbl_score": [], "valley_r": []}
+    oracle_areas = []
     for world, place in zip(worlds, places, strict=True):
-        sets: dict[str, LandmarkSet] = {"tbl": place.tbl, "static": place.static}
+        sets: dict[str, LandmarkSet] = {"tbl": place.tbl, "static": place.static,
+                                        "candidates": place.candidates}
         prepared = {name: PreparedTemplates.of(s.templates()) for name, s in sets.items()}
-        far = [PreparedPanorama.of(to_grey(view(place, unwarper, pose, rng)))
-               for pose in _far_poses(place, world, rng)]
-        if not far:
+        far_views = [PreparedPanorama.of(to_grey(view(place, unwarper, pose, rng)))
+                     for pose in _far_poses(place, world, rng)]
+        if not far_views:
             raise PlacecellError(f"{world}: no free pose beyond {REACH + 0.5} m of the place "
-                             "to measure the background LRP at")
-        far_counts.append(len(far))
-        background = {name: float(np.median([matcher.lrp(p, t) for p in far]))
-                      for name, t in prepared.items()}
+                                 "to measure the background LRP at")
+        far_counts.append(len(far_views))
+        # Best NCC of every template: at the far poses (n_far, n), on the grid (ny, nx, n).
+        far = {name: np.array([matcher.best_ncc(p, t) for p in far_views])
+               for name, t in prepared.items()}
         x0, y0, yaw = place.pose
         offsets = np.arange(-REACH, REACH + 1e-9, STEP)
-        lrp = {name: np.full((len(offsets), len(offsets)), np.nan) for name in prepared}
+        grid = {name: np.full((len(offsets), len(offsets), len(t.norms)), np.nan)
+                for name, t in prepared.items()}
         for j, dx in enumerate(offsets):
             for i, dy in enumerate(offsets):
                 x, y = x0 + dx, y0 + dy
@@ -96,15 +107,27 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                     continue
                 pano = PreparedPanorama.of(to_grey(view(place, unwarper, (x, y, yaw), rng)))
                 for name, t in prepared.items():
-                    lrp[name][i, j] = matcher.lrp(pano, t)
-        for name, values in lrp.items():
-            recognised = np.nan_to_num(values, nan=-1.0) > background[name] + MARGIN
+                    grid[name][i, j] = matcher.best_ncc(pano, t)
+        for name in ("tbl", "static"):
+            values, background, recognised = _recognised(grid[name], far[name])
             areas[name].append(int(recognised.sum()) * STEP * STEP)
             if args.plots:
                 plots.grid(Path(args.plots) / f"range-{len(areas[name]) - 1:02d}-{name}.png",
                            values, recognised, title=f"{world}: LRP of the {name} set "
-                           f"(background {background[name]:.2f})", lo=background[name] - 0.1,
+                           f"(background {background:.2f})", lo=background - 0.1,
                            hi=float(np.nanmax(values)), cell_m=STEP)
+        # Which selection score predicts a candidate's own usefulness for recognition: how
+        # far its best NCC stands above its own background, averaged over the grid.
+        usefulness = np.nanmean(grid["candidates"] - np.median(far["candidates"], axis=0),
+                                axis=(0, 1))
+        correlation["tbl_score"].append(_rank_correlation(
+            np.array([lm.score for lm in place.candidates.landmarks]), usefulness))
+        correlation["valley_r"].append(_rank_correlation(place.candidate_valley, usefulness))
+        # Not a method (it ranks by the test views themselves): the area the 16 most useful
+        # candidates reach: what a score of single candidates could at best achieve.
+        top = np.argsort(usefulness)[::-1][:16]
+        _, _, recognised = _recognised(grid["candidates"][..., top], far["candidates"][:, top])
+        oracle_areas.append(int(recognised.sum()) * STEP * STEP)
     return {
         "world": {"kind": kind, "seed": args.world_seed},
         "config": {"places": args.places, "grid_step_m": STEP, "reach_m": REACH,
@@ -116,5 +139,25 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 [t > s for t, s in zip(areas["tbl"], areas["static"], strict=True)])), 3),
             "tbl_area_per_place_m2": [round(a, 3) for a in areas["tbl"]],
             "static_area_per_place_m2": [round(a, 3) for a in areas["static"]],
+            # Spearman rank correlation, over each place's TBL candidates, of a selection
+            # score with the candidate's usefulness (mean over places).
+            "candidate_usefulness_correlation": {
+                name: round(float(np.mean(v)), 3) for name, v in correlation.items()},
+            "oracle_area_m2": round(float(np.mean(oracle_areas)), 3),
         },
     }
+
+
+def _recognised(grid_best: np.ndarray, far_best: np.ndarray
+                ) -> tuple[np.ndarray, float, np.ndarray]:
+    """A set's LRP on the grid (from its templates' best NCC there, (ny, nx, n)), its
+    background (median LRP at the far poses, (n_far, n)) and where it is recognised."""
+    values = grid_best.mean(axis=2)
+    background = float(np.median(far_best.mean(axis=1)))
+    return values, background, np.nan_to_num(values, nan=-1.0) > background + MARGIN
+
+
+def _rank_correlation(a: np.ndarray, b: np.ndarray) -> float:
+    """Spearman's rank correlation (no ties expected: continuous scores)."""
+    ranks_a, ranks_b = np.argsort(np.argsort(a)), np.argsort(np.argsort(b))
+    return float(np.corrcoef(ranks_a, ranks_b)[0, 1])
