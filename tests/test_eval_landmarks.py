@@ -55,6 +55,9 @@ def test_depth_experiment_prints_its_metrics_and_draws(tmp_path: Path) -> None:
     metrics = result["metrics"]
     assert set(metrics) >= {"median_error_m", "max_error_m", "coverage_2sigma"}
     assert metrics["landmarks"] == 16 and metrics["median_error_m"] < 0.10
+    # In the corridor the covariances are neither far wider nor far narrower than the errors
+    # (an honest Gaussian: 1.39).
+    assert 0.05 < metrics["median_mahalanobis_sq"] < 4.0
     figure = cv2.imread(str(tmp_path / "figures" / "depth.png"))
     assert figure is not None and figure.shape == (560, 560, 3)
     assert (figure < 200).any(axis=2).mean() > 0.01  # points, bars and axes were drawn
