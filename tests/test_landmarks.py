@@ -166,6 +166,23 @@ def test_ekf_covariance_is_honest() -> None:
     assert 0.80 <= np.mean(inside) <= 0.97
 
 
+def test_zoomed_observations_count_for_less() -> None:
+    """R = s σ²(c) + (k ln z)²: a landmark seen larger than in the reference (its template
+    slides) informs less; at the reference scale the zoom term vanishes."""
+    def after(zoom_noise: float, log_zoom: float) -> BearingOnlyEKF:
+        ekf = BearingOnlyEKF(np.array([1.0]), observation_variance_scale=0.015,
+                             zoom_noise_rad=zoom_noise)
+        ekf.predict(0.3, 0.0, 0.0)
+        ekf.update(0, 1.2, 0.95, log_zoom)
+        return ekf
+    plain, unzoomed, zoomed = after(0.0, 0.0), after(0.7, 0.0), after(0.7, 0.3)
+    assert np.array_equal(plain.P, unzoomed.P) and np.array_equal(plain.x, unzoomed.x)
+    var = [e.estimate(0).inverse_depth_var for e in (unzoomed, zoomed)]
+    assert var[1] > 1.5 * var[0]
+    # The update's gain shrinks as R grows by (0.7 * 0.3)²: the state moves less.
+    assert abs(zoomed.x[3] - 0.4) < abs(unzoomed.x[3] - 0.4)
+
+
 def test_far_landmarks_stay_uncertain() -> None:
     rng = np.random.default_rng(11)
     ekf = _run_tbl(rng, np.array([12.0]), np.array([0.8]))

@@ -24,9 +24,14 @@ class TblSettings:
     heading_noise_per_m: float = setting(0.02, ge=0.0, le=1.0,
                                          doc="EKF odometry heading noise gained per metre")
     observation_variance_scale: float = setting(
-        0.7, gt=0.0, le=100.0, doc="EKF: the thesis's NCC noise model σ² = ((1 − c)π + "
-        "π/180)² (§4.6.2) times this; 0.7 keeps the 2-sigma coverage honest in "
-        "`placecell-eval depth` (corridor and room)")
+        0.015, gt=0.0, le=100.0, doc="EKF: the thesis's NCC noise model σ² = ((1 − c)π + "
+        "π/180)² (§4.6.2) times this (σ 1.2° at NCC 0.95; tracking errors are correlated "
+        "over frames, so a few times the ~0.6° per-frame error)")
+    zoom_noise_rad: float = setting(
+        0.7, ge=0.0, le=10.0, doc="EKF: bearing noise std (rad) per unit of ln zoom, added "
+        "to the NCC term: a template on a landmark that appears larger or smaller than when "
+        "cut slides, the same way every frame. With the scale above it keeps the 2-sigma "
+        "coverage honest in `placecell-eval depth` (markers 0.7 m away and a 7 x 10 m room)")
     max_zoom: float = setting(
         1.5, ge=1.0, le=100.0, doc="EKF: bearings are used only while the landmark appears "
         "at most this much larger or smaller than in the reference (template matching is not "

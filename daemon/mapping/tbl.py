@@ -71,7 +71,8 @@ class TurnBackAndLook:
         self.ekf = BearingOnlyEKF(bearings, initial_depth=settings.initial_depth_m,
                                   bearing_sigma=math.radians(settings.reference_bearing_sigma_deg),
                                   heading_noise_per_m=settings.heading_noise_per_m,
-                                  observation_variance_scale=settings.observation_variance_scale)
+                                  observation_variance_scale=settings.observation_variance_scale,
+                                  zoom_noise_rad=settings.zoom_noise_rad)
         self.templates = self.candidates.templates()
         self.cols = self.candidates.cols().astype(float)
         self.rows = self.candidates.rows().astype(float)
@@ -114,8 +115,9 @@ class TurnBackAndLook:
         bearings = column_to_bearing_of_centre(result.cols, self.width)  # robot frame
         limit = math.log(self.settings.max_zoom)
         for i, (bearing, score) in enumerate(zip(bearings, result.scores, strict=True)):
-            if abs(math.log(zoom[i])) <= limit:
-                self.ekf.update(i, float(bearing), float(score))
+            log_zoom = math.log(zoom[i])
+            if abs(log_zoom) <= limit:
+                self.ekf.update(i, float(bearing), float(score), log_zoom)
         self.score_sum += np.maximum(result.scores, 0.0)
         self.rows = result.rows
         self.frames += 1
