@@ -54,7 +54,9 @@ def test_depth_experiment_prints_its_metrics_and_draws(tmp_path: Path) -> None:
     assert result["experiment"] == "depth"
     metrics = result["metrics"]
     assert set(metrics) >= {"median_error_m", "max_error_m", "coverage_2sigma"}
-    assert metrics["landmarks"] == 16 and metrics["median_error_m"] < 0.10
+    # The markers within 1 m of the place, identified as the thesis did by hand (§4.6.4).
+    assert 4 <= metrics["landmarks"] == metrics["landmarks_within_1m"] <= 8
+    assert metrics["median_error_m"] < 0.05
     # In the corridor the covariances are neither far wider nor far narrower than the errors
     # (an honest Gaussian: 1.39).
     assert 0.05 < metrics["median_mahalanobis_sq"] < 4.0

@@ -17,6 +17,7 @@ from daemon.vision.recognition import (
     PreparedPanorama,
     PreparedTemplates,
     best_ncc_bruteforce,
+    best_ncc_elsewhere,
 )
 from daemon.vision.selection import select_static, valley_measure
 from daemon.vision.tracking import predict_column, track
@@ -238,3 +239,29 @@ def test_exact_ncc_block_matches_opencv() -> None:
                FLAT_RMS * TEMPLATE, TEMPLATE, acc)
         assert np.allclose(acc, reference[r0:r0 + 3, c0:c0 + 3], atol=1e-4)
     assert acc.max() < 0.9 and reference[60, 200] > 0.999  # not a trivially equal map
+
+
+def test_best_look_alike_elsewhere_leaves_out_the_landmark_itself() -> None:
+    """A template pasted twice (once across the seam) has a look-alike of NCC 1 there; a
+    unique one's best look-alike is poor; windows overlapping the landmark never count."""
+    margin = 16
+    core = _textured((120, 720), 21)
+    twin = core[40:56, 100:116].copy()
+    core[70:86, 712:720], core[70:86, 0:8] = twin[:, :8], twin[:, 8:]  # across the seam
+    pano = add_wrap_margin(core, margin)
+    templates = np.stack([twin, core[10:26, 400:416]])
+    elsewhere = best_ncc_elsewhere(pano, margin, templates, np.array([100, 400]),
+                                   np.array([40, 10]))
+    assert elsewhere[0] == pytest.approx(1.0, abs=1e-4)  # its twin, found across the seam
+    assert elsewhere[1] < 0.8  # unique: its own spot (NCC 1) left out
+    # The twin's own spot is left out too: looked for from there, the original is found.
+    assert best_ncc_elsewhere(pano, margin, templates[:1], np.array([712]),
+                              np.array([70]))[0] == pytest.approx(1.0, abs=1e-4)
+    # Left out is exactly what overlaps: from 15 px away the original still overlaps the
+    # spot, from 16 px it no longer does.
+    def from_(col: int, row: int) -> float:
+        return float(best_ncc_elsewhere(pano, margin, templates[1:], np.array([col]),
+                                        np.array([row]))[0])
+    assert from_(400 - 15, 10 + 15) < 0.99
+    assert from_(400 - 16, 10 + 15) == pytest.approx(1.0, abs=1e-4)
+    assert from_(400 - 15, 10 + 16) == pytest.approx(1.0, abs=1e-4)

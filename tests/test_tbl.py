@@ -13,6 +13,8 @@ from daemon.errors import LearningAbortedError, LearningError
 from daemon.mapping.settings import TblSettings
 from daemon.mapping.tbl import Progress, _zoom, cross_legs
 from daemon.service.learning import learn_place, run_tbl
+from daemon.vision.landmarks import LandmarkSet
+from daemon.vision.selection import select_static
 from daemon.vision.unwarp import Unwarper
 from hal.registry import HalContext, create_base, create_camera
 from hal.sim.factory import shared_sim_robot
@@ -54,7 +56,7 @@ def test_learning_in_the_artificial_corridor() -> None:
                   progress=seen.append)
     landmarks, scored = tbl.result(), tbl.scored()
     assert len(landmarks.landmarks) == 16 and len(scored.landmarks) == 32
-    # The place keeps the 16 candidates with the highest mean NCC, depths and all.
+    # The place keeps the 16 best-scored candidates, depths and all.
     kept = {(lm.row, lm.col): lm for lm in landmarks.landmarks}
     dropped = [lm.score for lm in scored.landmarks if (lm.row, lm.col) not in kept]
     assert len(dropped) == 16 and min(lm.score for lm in kept.values()) >= max(dropped)
@@ -70,6 +72,29 @@ def test_learning_in_the_artificial_corridor() -> None:
     side = [lm for lm in landmarks.landmarks if abs(abs(lm.bearing) - math.pi / 2) < 0.2]
     assert side and all(abs(lm.depth - 0.7) < 0.1 for lm in side)
     assert all(lm.covariance.shape == (2, 2) and lm.covariance[0, 0] > 0
+               for lm in landmarks.landmarks)
+
+
+def test_given_candidates_are_tracked_instead_of_static_selection() -> None:
+    """Candidates chosen by someone else (the thesis's hand-identified markers, §4.6.4) are
+    tracked and kept as they are; none at all is refused before the robot moves."""
+    config = lockstep_config(world=CORRIDOR, start_pose=[0.0, 0.0, 0.0])
+    camera, base, robot = _devices(config)
+    unwarper = Unwarper(config.mirror, config.panorama)
+    with pytest.raises(LearningError, match="no landmark candidates"):
+        run_tbl(camera, base, unwarper, TblSettings(),
+                choose=lambda first, second, margin: LandmarkSet((), 720, margin))
+    assert robot.true_pose() == (0.0, 0.0, 0.0)
+    given: list[LandmarkSet] = []
+
+    def three_best(first, second, margin):  # type: ignore[no-untyped-def]
+        given.append(select_static(first, second, margin).best(3))
+        return given[-1]
+
+    landmarks = run_tbl(camera, base, unwarper, TblSettings(), choose=three_best).result()
+    assert sorted((lm.row, lm.col) for lm in landmarks.landmarks) == sorted(
+        (lm.row, lm.col) for lm in given[0].landmarks)
+    assert all(lm.score <= TblSettings().margin_cap and math.isfinite(lm.depth)
                for lm in landmarks.landmarks)
 
 

@@ -12,7 +12,14 @@ class TblSettings:
     extent_m: float = setting(0.5, gt=0.0, le=2.0, doc="cross arm: out and back along ±x, ±y")
     speed_m_s: float = setting(0.2, gt=0.0, le=1.0, doc="speed along the cross")
     candidates: int = setting(32, ge=4, le=64, doc="statically selected candidates (§4.2)")
-    keep: int = setting(16, ge=1, le=64, doc="landmarks kept by mean NCC (§4.3)")
+    keep: int = setting(16, ge=1, le=64, doc="landmarks kept: those with the best "
+                        "recognition margin over the cross (§4.3; daemon/mapping/tbl.py)")
+    margin_every: int = setting(4, ge=1, le=100, doc="every n-th frame of the cross, each "
+                                "candidate's best look-alike is searched for in the panorama")
+    margin_cap: float = setting(0.2, gt=0.0, le=2.0, doc="a candidate's margin over its "
+                                "best look-alike counts up to this NCC: beyond it it is "
+                                "unmistakable, and being more so should not outrank being "
+                                "reliably so")
     frame_timeout_s: float = setting(2.0, gt=0.0, le=30.0, doc="no frame this long: refuse")
     move_timeout_s: float = setting(20.0, gt=0.0, le=300.0, doc="one arm may take this long")
     search_cols: int = setting(12, ge=2, le=64, doc="tracking window half-width (columns)")

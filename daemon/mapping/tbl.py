@@ -4,8 +4,18 @@ Given the two reference panoramas it selects the candidate landmarks statically 
 then, frame by frame, it is handed the panorama, the odometry at the frame's stamp and
 whether the current move is done, and it tells which move to command next. It tracks
 every candidate with NCC around the position predicted from the EKF's pose and the
-candidate's depth, feeds the bearings to the depth EKF (§4.6), scores each candidate by
-its mean NCC, and in the end keeps the best ``keep`` with their depths and covariances.
+candidate's depth, feeds the bearings to the depth EKF (§4.6), scores each candidate, and
+in the end keeps the best ``keep`` with their depths and covariances.
+
+The score is the candidate's recognition margin over the cross: on every
+``margin_every``-th frame, its tracked NCC minus the best NCC of its best look-alike
+anywhere else in the panorama, capped at ``margin_cap``, averaged. The thesis scores the
+mean NCC alone (§4.3, SPEC §3.2), meant to keep the landmarks "recognisable over a large
+area"; but a landmark is recognised only where it beats everything else in view, and in
+cluttered rooms the generic corners that track best are the ones that look like much
+else. ``placecell-eval recognition-range`` measures it: over the candidates, the rank
+correlation with how useful each proved for recognition around the place is ~0 for the
+mean NCC and ~0.7 for the margin.
 A bearing feeds the EKF only while the landmark looks about as large as in the reference
 (``max_zoom``): approaching a wall 3x closer, a template slides off its point yet still
 matches well.
@@ -15,6 +25,7 @@ No device, no clock: the runner (daemon/service/learning.py) does the I/O.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -24,6 +35,7 @@ from daemon.mapping.settings import TblSettings
 from daemon.vision.depth_ekf import BearingOnlyEKF
 from daemon.vision.landmarks import LandmarkSet
 from daemon.vision.panorama import to_grey
+from daemon.vision.recognition import best_ncc_elsewhere
 from daemon.vision.selection import select_static
 from daemon.vision.tracking import column_to_bearing_of_centre, predict_column, track
 from hal.base.base import Odometry
@@ -54,17 +66,28 @@ def cross_legs(extent: float) -> list[tuple[str, float, float]]:
     return legs
 
 
+# Candidates from the two reference panoramas (with wrap margin ``margin``).
+CandidateChooser = Callable[[np.ndarray, np.ndarray, int], LandmarkSet]
+
+
 class TurnBackAndLook:
     def __init__(self, settings: TblSettings, reference_1: np.ndarray, reference_2: np.ndarray,
-                 margin: int, start: Odometry) -> None:
+                 margin: int, start: Odometry, choose: CandidateChooser | None = None) -> None:
+        """``choose``: the candidates to track; static selection (§4.2) unless given (the
+        thesis identified its artificial markers by hand to measure depth, §4.6.4)."""
         self.settings = settings
         self.margin = margin
-        self.candidates = select_static(reference_1, reference_2, margin,
-                                        count=settings.candidates)
-        if len(self.candidates.landmarks) < settings.keep:
-            raise LearningError(
-                f"only {len(self.candidates.landmarks)} textured landmark candidates in view "
-                f"(need {settings.keep}): the place is too plain to learn")
+        if choose is None:
+            self.candidates = select_static(reference_1, reference_2, margin,
+                                            count=settings.candidates)
+            if len(self.candidates.landmarks) < settings.keep:
+                raise LearningError(
+                    f"only {len(self.candidates.landmarks)} textured landmark candidates in "
+                    f"view (need {settings.keep}): the place is too plain to learn")
+        else:
+            self.candidates = choose(reference_1, reference_2, margin)
+            if not self.candidates.landmarks:
+                raise LearningError("no landmark candidates were given to track")
         n = len(self.candidates.landmarks)
         self.width = self.candidates.width
         bearings = np.array([lm.bearing for lm in self.candidates.landmarks])
@@ -76,7 +99,8 @@ class TurnBackAndLook:
         self.templates = self.candidates.templates()
         self.cols = self.candidates.cols().astype(float)
         self.rows = self.candidates.rows().astype(float)
-        self.score_sum = np.zeros(n)
+        self.margin_sum = np.zeros(n)
+        self.margin_frames = 0
         self.frames = 0
         self.legs = cross_legs(settings.extent_m)
         self.leg = 0
@@ -118,7 +142,11 @@ class TurnBackAndLook:
             log_zoom = math.log(zoom[i])
             if abs(log_zoom) <= limit:
                 self.ekf.update(i, float(bearing), float(score), log_zoom)
-        self.score_sum += np.maximum(result.scores, 0.0)
+        if self.frames % self.settings.margin_every == 0:
+            elsewhere = best_ncc_elsewhere(grey, self.margin, self.templates, result.cols,
+                                           result.rows)
+            self.margin_sum += np.minimum(result.scores - elsewhere, self.settings.margin_cap)
+            self.margin_frames += 1
         self.rows = result.rows
         self.frames += 1
         if move_done and self._commanded:
@@ -135,21 +163,22 @@ class TurnBackAndLook:
         self._last_odometry = b
 
     def scored(self) -> LandmarkSet:
-        """Every candidate, in selection order, scored by its mean NCC over the cross
-        (§4.3) and carrying its depth estimate (§4.6)."""
-        if not self.done or self.frames == 0:
+        """Every candidate, in selection order, scored by its recognition margin over the
+        cross (module docstring) and carrying its depth estimate (§4.6)."""
+        if not self.done or self.margin_frames == 0:
             raise LearningError("Turn Back and Look has not finished")
-        mean_ncc = self.score_sum / self.frames
+        margin = self.margin_sum / self.margin_frames
         landmarks = []
         for i, candidate in enumerate(self.candidates.landmarks):
             est = self.ekf.estimate(i)
             landmarks.append(replace(candidate, depth=est.depth, covariance=est.covariance,
-                                     bearing=est.bearing, score=float(mean_ncc[i])))
+                                     bearing=est.bearing, score=float(margin[i])))
         return LandmarkSet(tuple(landmarks), self.width, self.margin)
 
     def result(self) -> LandmarkSet:
-        """The place's landmark set: the ``keep`` most reliable candidates (highest mean
-        NCC, §4.3) with their depths, in bearing order."""
+        """The place's landmark set: the ``keep`` candidates that stood out best over the
+        cross (§4.3, scored as in the module docstring) with their depths, in bearing
+        order."""
         best = self.scored().best(self.settings.keep)
         by_bearing = tuple(sorted(best.landmarks, key=lambda lm: lm.bearing))
         return replace(best, landmarks=by_bearing)

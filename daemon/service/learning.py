@@ -12,7 +12,7 @@ from typing import Any
 from daemon.errors import DeviceTimeoutError, HalError, LearningAbortedError, LearningError
 from daemon.localisation.odometry import OdometryBuffer
 from daemon.mapping.settings import TblSettings
-from daemon.mapping.tbl import Progress, TurnBackAndLook
+from daemon.mapping.tbl import CandidateChooser, Progress, TurnBackAndLook
 from daemon.vision.landmarks import LandmarkSet
 from daemon.vision.unwarp import Unwarper
 from hal.base.base import Odometry
@@ -58,9 +58,10 @@ def learn_place(camera: Any, base: Any, unwarper: Unwarper, settings: TblSetting
 
 def run_tbl(camera: Any, base: Any, unwarper: Unwarper, settings: TblSettings, *,
             progress: ProgressCallback | None = None,
-            abort: threading.Event | None = None) -> TurnBackAndLook:
+            abort: threading.Event | None = None,
+            choose: CandidateChooser | None = None) -> TurnBackAndLook:
     """Drive the whole cross; returns the finished state machine (its result, and for
-    evaluation every scored candidate).
+    evaluation every scored candidate). ``choose``: see TurnBackAndLook.
 
     Refuses (LearningError) when the base cannot move or frames stop arriving; on
     ``abort`` the robot is stopped and LearningAbortedError raised (nothing is stored)."""
@@ -72,7 +73,7 @@ def run_tbl(camera: Any, base: Any, unwarper: Unwarper, settings: TblSettings, *
     f1, odo = sensors.frame()
     f2, _ = sensors.frame()
     tbl = TurnBackAndLook(settings, unwarper.unwarp(f1.image), unwarper.unwarp(f2.image),
-                          margin, odo)
+                          margin, odo, choose)
     frames_this_leg = 0
     max_frames_per_leg = None
     try:

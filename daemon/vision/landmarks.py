@@ -25,7 +25,7 @@ class Landmark:
     bearing: float  # reference bearing of the template centre (rad)
     depth: float = float("nan")  # metres; NaN until estimated (TBL, §4.6)
     covariance: np.ndarray = field(default_factory=lambda: np.full((2, 2), np.nan))  # (d, γ)
-    score: float = 0.0  # selection score: valley measure r (static) or mean NCC (TBL)
+    score: float = 0.0  # selection score: valley measure r (static) or margin (TBL)
 
 
 @dataclass(frozen=True)

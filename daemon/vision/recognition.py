@@ -33,6 +33,7 @@ import numpy as np
 
 from daemon.vision.landmarks import TEMPLATE, LandmarkSet
 from daemon.vision.ncc import ncc_map
+from daemon.vision.panorama import add_wrap_margin, core_of
 
 
 def best_ncc_bruteforce(panorama_grey: np.ndarray, templates: np.ndarray) -> np.ndarray:
@@ -43,6 +44,27 @@ def best_ncc_bruteforce(panorama_grey: np.ndarray, templates: np.ndarray) -> np.
 def lrp_bruteforce(panorama_grey: np.ndarray, landmarks: LandmarkSet) -> float:
     """LRP (§4.4): mean of the best NCC of each template over the whole panorama."""
     return float(best_ncc_bruteforce(panorama_grey, landmarks.templates()).mean())
+
+
+def best_ncc_elsewhere(panorama_grey: np.ndarray, margin: int, templates: np.ndarray,
+                       cols: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """(N,) best NCC of each template in the panorama (with wrap ``margin``) away from
+    where it was found (core column ``cols``, top row ``rows``): every window overlapping
+    that spot is left out, across the seam. How well the landmark's best look-alike
+    matches; the landmark stands out by its own NCC minus this."""
+    core = core_of(panorama_grey, margin)
+    width = core.shape[1]
+    wrapped = add_wrap_margin(core, TEMPLATE)  # every window start, the seam included
+    out = np.empty(len(templates))
+    for i, (template, col, row) in enumerate(zip(templates, cols, rows, strict=True)):
+        scores = ncc_map(wrapped, template)
+        starts = (np.arange(scores.shape[1]) - TEMPLATE) % width  # core column of each
+        apart = np.abs(starts - col)
+        overlaps_cols = np.minimum(apart, width - apart) < TEMPLATE
+        overlaps_rows = np.abs(np.arange(scores.shape[0]) - row) < TEMPLATE
+        scores[np.ix_(overlaps_rows, overlaps_cols)] = -1.0
+        out[i] = float(scores.max())
+    return out
 
 
 COARSE = TEMPLATE // 2  # side of a template at half resolution

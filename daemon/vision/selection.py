@@ -20,6 +20,7 @@ from daemon.vision.landmarks import TEMPLATE, Landmark, LandmarkSet, centre_bear
 from daemon.vision.panorama import add_wrap_margin, core_of, to_grey
 
 SHIFT = 8  # a 32 x 32 window around a 16 x 16 template: shifts of -8..8
+MIN_TEXTURE = 6.0  # grey-level std below which a window is too flat to be a landmark
 RING = [(dy, dx) for dy in range(-2, 3) for dx in range(-2, 3) if max(abs(dy), abs(dx)) == 2]
 
 
@@ -78,7 +79,7 @@ def texture(p: np.ndarray) -> np.ndarray:
 
 
 def select_static(pano1: np.ndarray, pano2: np.ndarray, margin: int, *, count: int = 32,
-                  per_sector: int = 8, min_texture: float = 6.0, variant: str = "ring",
+                  per_sector: int = 8, min_texture: float = MIN_TEXTURE, variant: str = "ring",
                   exclude_rows: tuple[int, int] | None = None) -> LandmarkSet:
     """The ``count`` best landmarks, ``per_sector`` from each 90° sector (SPEC §3.1).
 

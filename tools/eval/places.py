@@ -10,9 +10,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from daemon.config import PlacecellConfig, load
+from daemon.mapping.tbl import CandidateChooser
 from daemon.service.learning import run_tbl
 from daemon.vision.landmarks import LandmarkSet
-from daemon.vision.selection import select_static
 from daemon.vision.unwarp import Unwarper
 from hal.registry import HalContext, create_base, create_camera
 from hal.sim.factory import shared_sim_robot
@@ -23,14 +23,15 @@ from hal.sim.render import Person, Renderer
 class LearnedPlace:
     pose: tuple[float, float, float]  # true reference pose (evaluator only)
     tbl: LandmarkSet  # Turn Back and Look: 16 landmarks with depths
-    static: LandmarkSet  # the 16 best of static selection alone, same reference
+    static: LandmarkSet  # the 16 best of static selection alone, same reference frames
     renderer: Renderer
-    candidates: LandmarkSet  # all TBL candidates, scored by mean NCC over the cross
+    candidates: LandmarkSet  # all TBL candidates, with their TBL scores and depths
     candidate_valley: np.ndarray  # their valley measure r from static selection, same order
 
 
 def learn(world: str, pose: tuple[float, float, float], seed: int,
-          config: PlacecellConfig | None = None) -> LearnedPlace:
+          config: PlacecellConfig | None = None,
+          choose: CandidateChooser | None = None) -> LearnedPlace:
     base_config = config or load(None)
     cfg = dataclasses.replace(base_config, sim=dataclasses.replace(
         base_config.sim, world=world, start_pose=list(pose), realtime=False, seed=seed))
@@ -41,14 +42,12 @@ def learn(world: str, pose: tuple[float, float, float], seed: int,
     robot = shared_sim_robot(ctx)
     reference = robot.true_pose()
     unwarper = Unwarper(cfg.mirror, cfg.panorama)
-    margin = cfg.panorama.wrap_margin
-    # Static-only: the same two reference frames the TBL starts from would do; two fresh
-    # frames at the reference give the same statistics.
-    p1 = unwarper.unwarp(robot.render_frame().image)
-    p2 = unwarper.unwarp(robot.render_frame().image)
-    static = select_static(p1, p2, margin).best(16)
-    tbl = run_tbl(camera, base, unwarper, cfg.tbl)
+    tbl = run_tbl(camera, base, unwarper, cfg.tbl, choose=choose)
     assert robot.renderer is not None
+    # Static-only: the 16 best by valley measure of the very candidates TBL started from
+    # (same reference frames), so the two sets differ by the dynamic phase alone, not by
+    # the noise in two other frames.
+    static = tbl.candidates.best(16)
     return LearnedPlace(reference, tbl.result(), static, robot.renderer, tbl.scored(),
                         np.array([lm.score for lm in tbl.candidates.landmarks]))
 

@@ -13,7 +13,7 @@ recognised area is reported for both selections.
 Why one selection wins is measured too: for each of the place's TBL candidates, its
 usefulness — how far its own best NCC stands above its own background (median at the far
 poses), averaged over the grid — and the rank correlation of each selection score (TBL's
-mean NCC, static selection's valley measure r) with that usefulness; and, as a bound
+recognition margin, static selection's valley measure r) with that usefulness; and, as a bound
 rather than a method, the area of the 16 candidates that proved most useful.
 """
 
