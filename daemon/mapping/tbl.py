@@ -16,6 +16,7 @@ cluttered rooms the generic corners that track best are the ones that look like 
 else. ``placecell-eval recognition-range`` measures it: over the candidates, the rank
 correlation with how useful each proved for recognition around the place is ~0 for the
 mean NCC and ~0.7 for the margin.
+
 A bearing feeds the EKF only while the landmark looks about as large as in the reference
 (``max_zoom``): approaching a wall 3x closer, a template slides off its point yet still
 matches well.
@@ -99,8 +100,8 @@ class TurnBackAndLook:
         self.templates = self.candidates.templates()
         self.cols = self.candidates.cols().astype(float)
         self.rows = self.candidates.rows().astype(float)
-        self.margin_sum = np.zeros(n)
-        self.margin_frames = 0
+        self.recognition_margin_sum = np.zeros(n)
+        self.recognition_margin_frames = 0
         self.frames = 0
         self.legs = cross_legs(settings.extent_m)
         self.leg = 0
@@ -145,8 +146,9 @@ class TurnBackAndLook:
         if self.frames % self.settings.margin_every == 0:
             elsewhere = best_ncc_elsewhere(grey, self.margin, self.templates, result.cols,
                                            result.rows)
-            self.margin_sum += np.minimum(result.scores - elsewhere, self.settings.margin_cap)
-            self.margin_frames += 1
+            lead = result.scores - elsewhere  # over the best look-alike, in NCC
+            self.recognition_margin_sum += np.minimum(lead, self.settings.margin_cap)
+            self.recognition_margin_frames += 1
         self.rows = result.rows
         self.frames += 1
         if move_done and self._commanded:
@@ -165,14 +167,15 @@ class TurnBackAndLook:
     def scored(self) -> LandmarkSet:
         """Every candidate, in selection order, scored by its recognition margin over the
         cross (module docstring) and carrying its depth estimate (§4.6)."""
-        if not self.done or self.margin_frames == 0:
+        if not self.done or self.recognition_margin_frames == 0:
             raise LearningError("Turn Back and Look has not finished")
-        margin = self.margin_sum / self.margin_frames
+        recognition_margin = self.recognition_margin_sum / self.recognition_margin_frames
         landmarks = []
         for i, candidate in enumerate(self.candidates.landmarks):
             est = self.ekf.estimate(i)
             landmarks.append(replace(candidate, depth=est.depth, covariance=est.covariance,
-                                     bearing=est.bearing, score=float(margin[i])))
+                                     bearing=est.bearing,
+                                     score=float(recognition_margin[i])))
         return LandmarkSet(tuple(landmarks), self.width, self.margin)
 
     def result(self) -> LandmarkSet:
