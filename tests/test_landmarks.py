@@ -10,7 +10,7 @@ import pytest
 
 from daemon.vision.depth_ekf import BearingOnlyEKF, observation_variance
 from daemon.vision.landmarks import TEMPLATE, centre_bearing
-from daemon.vision.ncc import ncc, ncc_map, subpixel_peak
+from daemon.vision.ncc import ncc, ncc_map, ncc_under_light, subpixel_peak
 from daemon.vision.panorama import add_wrap_margin
 from daemon.vision.recognition import (
     FastMatcher,
@@ -265,3 +265,13 @@ def test_best_look_alike_elsewhere_leaves_out_the_landmark_itself() -> None:
     assert from_(400 - 15, 10 + 15) < 0.99
     assert from_(400 - 16, 10 + 15) == pytest.approx(1.0, abs=1e-4)
     assert from_(400 - 15, 10 + 16) == pytest.approx(1.0, abs=1e-4)
+
+
+def test_light_that_saturates_a_template_takes_its_pattern() -> None:
+    rng = np.random.default_rng(22)
+    pattern = rng.uniform(0.0, 1.0, (16, 16))
+    dark = (20 + 100 * pattern).astype(np.uint8)  # 20..120: x1.5 stays below 255
+    bright = (175 + 75 * pattern).astype(np.uint8)  # 175..250: x1.5 clips every pixel
+    assert ncc_under_light(dark, (0.5, 1.5)) > 0.99
+    assert ncc_under_light(bright, (0.5,)) > 0.99  # dimmer: nothing clips
+    assert ncc_under_light(bright, (0.5, 1.5)) < 0.5

@@ -57,9 +57,14 @@ def test_learning_in_the_artificial_corridor() -> None:
     landmarks, scored = tbl.result(), tbl.scored()
     assert len(landmarks.landmarks) == 16 and len(scored.landmarks) == 32
     # The place keeps the 16 best-scored candidates, depths and all.
+    # Kept: those that survive a change of light first, then the highest scores.
     kept = {(lm.row, lm.col): lm for lm in landmarks.landmarks}
-    dropped = [lm.score for lm in scored.landmarks if (lm.row, lm.col) not in kept]
-    assert len(dropped) == 16 and min(lm.score for lm in kept.values()) >= max(dropped)
+    rank = [(tbl.survives_light[i], lm.score) for i, lm in enumerate(scored.landmarks)]
+    kept_rank = [r for r, lm in zip(rank, scored.landmarks, strict=True)
+                 if (lm.row, lm.col) in kept]
+    dropped_rank = [r for r, lm in zip(rank, scored.landmarks, strict=True)
+                    if (lm.row, lm.col) not in kept]
+    assert len(dropped_rank) == 16 and min(kept_rank) >= max(dropped_rank)
     assert all(kept[lm.row, lm.col].depth == lm.depth for lm in scored.landmarks
                if (lm.row, lm.col) in kept)
     assert [lm.bearing for lm in landmarks.landmarks] == sorted(

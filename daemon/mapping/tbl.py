@@ -15,7 +15,9 @@ area"; but a landmark is recognised only where it beats everything else in view,
 cluttered rooms the generic corners that track best are the ones that look like much
 else. ``placecell-eval recognition-range`` measures it: over the candidates, the rank
 correlation with how useful each proved for recognition around the place is ~0 for the
-mean NCC and ~0.7 for the margin.
+mean NCC and ~0.7 for the margin. A landmark must also survive the light changing
+(``light_change``): NCC ignores gain, but a brighter scene saturates bright pixels and
+takes their pattern away, so candidates that would lose it are kept last.
 
 A bearing feeds the EKF only while the landmark looks about as large as in the reference
 (``max_zoom``): approaching a wall 3x closer, a template slides off its point yet still
@@ -35,6 +37,7 @@ from daemon.errors import LearningError
 from daemon.mapping.settings import TblSettings
 from daemon.vision.depth_ekf import BearingOnlyEKF
 from daemon.vision.landmarks import LandmarkSet
+from daemon.vision.ncc import ncc_under_light
 from daemon.vision.panorama import to_grey
 from daemon.vision.recognition import best_ncc_elsewhere
 from daemon.vision.selection import select_static
@@ -98,6 +101,9 @@ class TurnBackAndLook:
                                   observation_variance_scale=settings.observation_variance_scale,
                                   zoom_noise_rad=settings.zoom_noise_rad)
         self.templates = self.candidates.templates()
+        gains = (1.0 - settings.light_change, 1.0 + settings.light_change)
+        self.survives_light = [ncc_under_light(t, gains) >= settings.light_ncc
+                               for t in self.templates]
         self.cols = self.candidates.cols().astype(float)
         self.rows = self.candidates.rows().astype(float)
         self.recognition_margin_sum = np.zeros(n)
@@ -181,10 +187,13 @@ class TurnBackAndLook:
     def result(self) -> LandmarkSet:
         """The place's landmark set: the ``keep`` candidates that stood out best over the
         cross (§4.3, scored as in the module docstring) with their depths, in bearing
-        order."""
-        best = self.scored().best(self.settings.keep)
-        by_bearing = tuple(sorted(best.landmarks, key=lambda lm: lm.bearing))
-        return replace(best, landmarks=by_bearing)
+        order; those that would lose their pattern in brighter or dimmer light
+        (``light_change``) only when too few others are left."""
+        scored = self.scored()
+        ranked = sorted(range(len(scored.landmarks)), key=lambda i: (
+            not self.survives_light[i], -scored.landmarks[i].score))
+        kept = [scored.landmarks[i] for i in ranked[: self.settings.keep]]
+        return replace(scored, landmarks=tuple(sorted(kept, key=lambda lm: lm.bearing)))
 
 
 def _zoom(depth: float, bearing: float, pose: tuple[float, float, float]) -> float:

@@ -23,6 +23,14 @@ def ncc(a: np.ndarray, b: np.ndarray) -> float:
     return float((a * b).sum() / den) if den > 0 else 0.0
 
 
+def ncc_under_light(template: np.ndarray, gains: tuple[float, ...]) -> float:
+    """The lowest NCC of a grey ``template`` with itself under each light gain, its pixels
+    clipped to 0..255 as a camera's would be. NCC is blind to gain alone (§4.5.2); what a
+    brighter scene takes away is the pattern in the pixels that saturate."""
+    t = template.astype(np.float64)
+    return min(ncc(t, np.clip(np.round(t * g), 0.0, 255.0)) for g in gains)
+
+
 def subpixel_peak(scores: np.ndarray) -> tuple[float, float, float]:
     """(score, x, y) of the maximum of a score map, refined by a parabola through the
     peak and its neighbours along each axis."""
