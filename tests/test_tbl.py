@@ -7,11 +7,12 @@ import math
 import threading
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from daemon.errors import LearningAbortedError, LearningError
 from daemon.mapping.settings import TblSettings
-from daemon.mapping.tbl import Progress, _zoom, cross_legs
+from daemon.mapping.tbl import Progress, _zoom, cross_legs, keep_in_light
 from daemon.service.learning import learn_place, run_tbl
 from daemon.vision.landmarks import LandmarkSet
 from daemon.vision.selection import select_static
@@ -48,6 +49,16 @@ def test_zoom_of_a_wall_landmark_seen_from_the_cross() -> None:
     assert _zoom(math.inf, 0.0, (0.5, 0.0, 0.0)) == 1.0  # unresolved: no gating
 
 
+def test_kept_set_holds_up_in_changed_light() -> None:
+    scores = np.array([0.9, 0.8, 0.7, 0.6, 0.5])
+    light = np.array([0.5, 1.0, 0.99, 1.0, 1.0])
+    assert sorted(keep_in_light(scores, light, 2, 0.0)) == [0, 1]  # no demand: best two
+    # Mean 0.75 < 0.95: the one that suffers (0) gives way to the best spare that holds.
+    assert sorted(keep_in_light(scores, light, 2, 0.95)) == [1, 2]
+    # No spare holds up to the floor: the best two stay.
+    assert sorted(keep_in_light(scores, np.array([0.5, 0.6, 0.7, 0.8, 0.9]), 2, 0.95)) == [0, 1]
+
+
 def test_learning_in_the_artificial_corridor() -> None:
     config = lockstep_config(world=CORRIDOR, start_pose=[0.0, 0.0, 0.0])
     camera, base, robot = _devices(config)
@@ -57,14 +68,14 @@ def test_learning_in_the_artificial_corridor() -> None:
     landmarks, scored = tbl.result(), tbl.scored()
     assert len(landmarks.landmarks) == 16 and len(scored.landmarks) == 32
     # The place keeps the 16 best-scored candidates, depths and all.
-    # Kept: those that survive a change of light first, then the highest scores.
+    # Kept: the best scored, as long as the set holds up in changed light.
     kept = {(lm.row, lm.col): lm for lm in landmarks.landmarks}
-    rank = [(tbl.survives_light[i], lm.score) for i, lm in enumerate(scored.landmarks)]
-    kept_rank = [r for r, lm in zip(rank, scored.landmarks, strict=True)
-                 if (lm.row, lm.col) in kept]
-    dropped_rank = [r for r, lm in zip(rank, scored.landmarks, strict=True)
-                    if (lm.row, lm.col) not in kept]
-    assert len(dropped_rank) == 16 and min(kept_rank) >= max(dropped_rank)
+    is_kept = np.array([(lm.row, lm.col) in kept for lm in scored.landmarks])
+    scores = np.array([lm.score for lm in scored.landmarks])
+    floor = TblSettings().light_ncc
+    assert is_kept.sum() == 16 and tbl.light_ncc[is_kept].mean() >= floor
+    holding = tbl.light_ncc >= floor
+    assert scores[is_kept & holding].min() >= scores[~is_kept & holding].max()
     assert all(kept[lm.row, lm.col].depth == lm.depth for lm in scored.landmarks
                if (lm.row, lm.col) in kept)
     assert [lm.bearing for lm in landmarks.landmarks] == sorted(

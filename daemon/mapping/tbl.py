@@ -15,9 +15,9 @@ area"; but a landmark is recognised only where it beats everything else in view,
 cluttered rooms the generic corners that track best are the ones that look like much
 else. ``placecell-eval recognition-range`` measures it: over the candidates, the rank
 correlation with how useful each proved for recognition around the place is ~0 for the
-mean NCC and ~0.7 for the margin. A landmark must also survive the light changing
-(``light_change``): NCC ignores gain, but a brighter scene saturates bright pixels and
-takes their pattern away, so candidates that would lose it are kept last.
+mean NCC and ~0.7 for the margin. The set must also stay recognisable when the light
+changes (``light_change``): NCC ignores gain, but a brighter scene saturates bright
+pixels and takes their pattern away (``keep_in_light``).
 
 A bearing feeds the EKF only while the landmark looks about as large as in the reference
 (``max_zoom``): approaching a wall 3x closer, a template slides off its point yet still
@@ -102,8 +102,7 @@ class TurnBackAndLook:
                                   zoom_noise_rad=settings.zoom_noise_rad)
         self.templates = self.candidates.templates()
         gains = (1.0 - settings.light_change, 1.0 + settings.light_change)
-        self.survives_light = [ncc_under_light(t, gains) >= settings.light_ncc
-                               for t in self.templates]
+        self.light_ncc = np.array([ncc_under_light(t, gains) for t in self.templates])
         self.cols = self.candidates.cols().astype(float)
         self.rows = self.candidates.rows().astype(float)
         self.recognition_margin_sum = np.zeros(n)
@@ -187,13 +186,31 @@ class TurnBackAndLook:
     def result(self) -> LandmarkSet:
         """The place's landmark set: the ``keep`` candidates that stood out best over the
         cross (§4.3, scored as in the module docstring) with their depths, in bearing
-        order; those that would lose their pattern in brighter or dimmer light
-        (``light_change``) only when too few others are left."""
+        order, as long as the set stays recognisable in brighter or dimmer light
+        (``keep_in_light``)."""
         scored = self.scored()
-        ranked = sorted(range(len(scored.landmarks)), key=lambda i: (
-            not self.survives_light[i], -scored.landmarks[i].score))
-        kept = [scored.landmarks[i] for i in ranked[: self.settings.keep]]
+        chosen = keep_in_light(np.array([lm.score for lm in scored.landmarks]),
+                               self.light_ncc, self.settings.keep, self.settings.light_ncc)
+        kept = [scored.landmarks[i] for i in chosen]
         return replace(scored, landmarks=tuple(sorted(kept, key=lambda lm: lm.bearing)))
+
+
+def keep_in_light(scores: np.ndarray, light_ncc: np.ndarray, keep: int, floor: float
+                  ) -> list[int]:
+    """The ``keep`` best-scored candidates, but the set's mean NCC under the changed light
+    (each template against itself, ``light_ncc``) must reach ``floor``, as the set's LRP
+    would: while it does not, the kept one that suffers most is swapped for the best-scored
+    spare that holds up to the floor on its own."""
+    ranked = [int(i) for i in np.argsort(-scores, kind="stable")]
+    kept, spares = ranked[:keep], ranked[keep:]
+    while kept and float(np.mean(light_ncc[kept])) < floor:
+        spare = next((j for j in spares if light_ncc[j] >= floor), None)
+        if spare is None:
+            break  # nothing better left: keep the best there is
+        kept.remove(min(kept, key=lambda i: light_ncc[i]))
+        kept.append(spare)
+        spares.remove(spare)
+    return kept
 
 
 def _zoom(depth: float, bearing: float, pose: tuple[float, float, float]) -> float:
