@@ -10,10 +10,11 @@ within 1 m (SPEC §3.3 expects ±0.1 m there).
 
 ``--artificial`` is the thesis's artificial-landmark test (§4.6.4): flat markers on both
 corridor walls 0.7 m away, "manually identified in the reference panoramic image" and
-then tracked through the cross. Here the evaluator plays the person who points at them:
-a template centred on every marker within ``MARKER_REACH_M`` of the reference; tracking
-and depth estimation are the daemon's own. (Left to choose for itself, TBL prefers
-landmarks that look like nothing else in view; markers of one pattern look alike.)
+then tracked through the cross. Here the evaluator plays the person who points at them
+(tools/eval/markers.py): one template on every marker within ``MARKER_REACH_M`` of the
+reference; tracking and depth estimation are the daemon's own. (Left to choose for
+itself, TBL prefers landmarks that look like nothing else in view; markers of one
+pattern look alike.)
 """
 
 from __future__ import annotations
@@ -27,19 +28,10 @@ from typing import Any
 import numpy as np
 
 from daemon.config import load
-from daemon.mapping.tbl import CandidateChooser
-from daemon.vision.landmarks import TEMPLATE, Landmark, LandmarkSet, centre_bearing
-from daemon.vision.panorama import (
-    add_wrap_margin,
-    column_of_bearing,
-    core_of,
-    row_of_elevation,
-    to_grey,
-)
-from daemon.vision.selection import MIN_TEXTURE, texture, valley_measure
-from daemon.vision.settings import PanoramaSettings
-from hal.sim.world import World, load_world
+from daemon.vision.landmarks import centre_bearing
+from hal.sim.world import load_world
 from tools.eval import plots
+from tools.eval.markers import markers_in_view
 from tools.eval.places import learn
 from tools.eval.truth import landmark_depth
 
@@ -71,8 +63,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     plotted: list[tuple[float, float, float]] = []  # (truth, estimate, 2 sigma)
     panorama = load(None).panorama
     for world, pose in _places(args):
-        choose = _markers_in_view(load_world(world), pose, panorama) if args.artificial \
-            else None
+        choose = markers_in_view(load_world(world), pose, panorama, MARKER_REACH_M) \
+            if args.artificial else None
         place = learn(world, pose, args.seed, choose=choose)
         landmarks, reference = place.tbl, place.pose
         for lm in landmarks.landmarks:
@@ -119,70 +111,3 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         },
     }
 
-
-def _markers(world: World) -> list[tuple[tuple[float, float], tuple[float, float], float,
-                                         float]]:
-    """Every marker painted on the walls: its two ends (x, y) and its bottom and top z."""
-    out = []
-    for wall in world.walls:
-        corners = list(wall.points) + ([wall.points[0]] if wall.closed else [])
-        for deco in (d for d in wall.decorations if d.kind == "marker"):
-            along = deco.at_m
-            for (ax, ay), (bx, by) in zip(corners, corners[1:], strict=False):
-                length = math.hypot(bx - ax, by - ay)
-                if along + deco.width_m <= length:
-                    ux, uy = (bx - ax) / length, (by - ay) / length
-                    out.append(((ax + along * ux, ay + along * uy),
-                                (ax + (along + deco.width_m) * ux,
-                                 ay + (along + deco.width_m) * uy),
-                                deco.bottom_m, deco.bottom_m + deco.height_m))
-                    break
-                along -= length
-    return out
-
-
-def _markers_in_view(world: World, pose: tuple[float, float, float],
-                     panorama: PanoramaSettings) -> CandidateChooser:
-    """Candidates for TBL: a template on each marker whose centre is within
-    ``MARKER_REACH_M`` of ``pose``, cut from the first reference panorama (§4.6.4's hand
-    identification)."""
-    x0, y0, yaw = pose
-    top = math.radians(panorama.elevation_top_deg)
-    bottom = math.radians(panorama.elevation_bottom_deg)
-    half = (TEMPLATE - 1) / 2.0
-
-    def choose(reference: np.ndarray, second: np.ndarray, margin: int) -> LandmarkSet:
-        core = core_of(to_grey(reference), margin)
-        height, width = core.shape
-        wrapped = add_wrap_margin(core, TEMPLATE)  # core column c starts at c + TEMPLATE
-        distinct, _ = valley_measure(core, core_of(to_grey(second), margin))
-        distinct[texture(core) < MIN_TEXTURE] = -np.inf
-
-        def column(x: float, y: float) -> float:  # unwrapped around the marker's centre
-            return float(column_of_bearing(math.atan2(y - y0, x - x0) - yaw, width))
-
-        landmarks = []
-        for (xa, ya), (xb, yb), z_low, z_high in _markers(world):
-            xc, yc = (xa + xb) / 2.0, (ya + yb) / 2.0
-            distance = math.hypot(xc - x0, yc - y0)
-            if distance > MARKER_REACH_M:
-                continue
-            centre = column(xc, yc)
-            ends = [centre + math.remainder(column(x, y) - centre, width)
-                    for x, y in ((xa, ya), (xb, yb))]
-            rows = [float(row_of_elevation(math.atan2(z - panorama.camera_height_m, distance),
-                                           height, top, bottom)) for z in (z_high, z_low)]
-            # Where on the marker: the window centred on it that static selection rates
-            # most distinctive (§4.2's valley measure), as a person would pick a corner.
-            windows = [(float(distinct[r, c % width]), r, c % width)
-                       for r in range(math.ceil(rows[0] - half), math.floor(rows[1] - half) + 1)
-                       for c in range(math.ceil(min(ends) - half), math.floor(max(ends) - half) + 1)
-                       if 0 <= r <= height - TEMPLATE]
-            if windows and max(windows)[0] > -np.inf:
-                _, row, col = max(windows)
-                template = wrapped[row:row + TEMPLATE, col + TEMPLATE:col + 2 * TEMPLATE]
-                landmarks.append(Landmark(template.copy(), row, col,
-                                          centre_bearing(col, width)))
-        return LandmarkSet(tuple(landmarks), width, margin)
-
-    return choose
