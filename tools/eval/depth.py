@@ -8,13 +8,13 @@ bearing and row, and its 2 x 2 covariance with that error (2-sigma ellipse: Maha
 distance <= 2, 86 % for an honest Gaussian). Errors are also reported for the landmarks
 within 1 m (SPEC §3.3 expects ±0.1 m there).
 
-``--artificial`` is the thesis's artificial-landmark test (§4.6.4): flat markers on both
-corridor walls 0.7 m away, "manually identified in the reference panoramic image" and
-then tracked through the cross. Here the evaluator plays the person who points at them
-(tools/eval/markers.py): one template on every marker within ``MARKER_REACH_M`` of the
-reference; tracking and depth estimation are the daemon's own. (Left to choose for
-itself, TBL prefers landmarks that look like nothing else in view; markers of one
-pattern look alike.)
+``--artificial`` is the corridor of the thesis's artificial-landmark test (§4.6.4): flat
+markers on both walls 0.7 m away; TBL chooses its landmarks as the daemon would. With
+``--hand-markers`` the landmarks are the thesis's own protocol instead: the markers,
+"manually identified in the reference panoramic image", then tracked through the cross.
+The evaluator plays the person who points at them (tools/eval/markers.py): one template
+on every marker within ``MARKER_REACH_M`` of the reference; tracking and depth
+estimation are the daemon's own.
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from daemon.config import load
+from daemon.errors import PlacecellError
 from daemon.vision.landmarks import centre_bearing
 from hal.sim.world import load_world
 from tools.eval import plots
@@ -44,6 +45,9 @@ MARKER_REACH_M = 1.0  # SPEC §3.3: ±0.1 m for landmarks within ~1 m
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--artificial", action="store_true",
                    help="the corridor with flat markers 0.7 m away (thesis §4.6.4)")
+    p.add_argument("--hand-markers", action="store_true",
+                   help="with --artificial: track the markers within 1 m, identified by "
+                        "hand as in the thesis, instead of TBL's own choice")
     p.add_argument("--places", type=int, default=10,
                    help="places to learn (one world seed each; corridor: positions along it)")
 
@@ -59,12 +63,14 @@ def _places(args: argparse.Namespace) -> list[tuple[str, tuple[float, float, flo
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
+    if args.hand_markers and not args.artificial:
+        raise PlacecellError("--hand-markers needs --artificial: only that corridor has markers")
     errors, mahalanobis_sq, far, near_errors = [], [], 0, []
     plotted: list[tuple[float, float, float]] = []  # (truth, estimate, 2 sigma)
     panorama = load(None).panorama
     for world, pose in _places(args):
         choose = markers_in_view(load_world(world), pose, panorama, MARKER_REACH_M) \
-            if args.artificial else None
+            if args.hand_markers else None
         place = learn(world, pose, args.seed, choose=choose)
         landmarks, reference = place.tbl, place.pose
         for lm in landmarks.landmarks:
@@ -94,7 +100,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     return {
         "world": {"kind": world_kind,
                   "seed": args.world_seed},
-        "config": {"places": args.places, "tbl": dataclasses.asdict(load(None).tbl)},
+        "config": {"places": args.places, "hand_markers": args.hand_markers,
+                   "tbl": dataclasses.asdict(load(None).tbl)},
         "metrics": {
             "median_error_m": round(float(np.median(errors)), 4),
             "max_error_m": round(float(np.max(errors)), 4),
