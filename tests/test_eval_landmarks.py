@@ -88,6 +88,7 @@ def test_recognition_range_compares_selections_and_explains(tmp_path: Path) -> N
     for name in ("tbl", "static"):
         assert 0.5 < metrics[f"{name}_area_m2"] < grid_area
     assert metrics["oracle_area_m2"] >= 0.5
+    assert 0.0 <= metrics["static_light_area_m2"] < grid_area
     correlation = metrics["candidate_usefulness_correlation"]
     assert set(correlation) == {"tbl_score", "valley_r"}
     assert all(-1.0 <= c <= 1.0 for c in correlation.values())

@@ -13,8 +13,9 @@ recognised area is reported for both selections.
 Why one selection wins is measured too: for each of the place's TBL candidates, its
 usefulness — how far its own best NCC stands above its own background (median at the far
 poses), averaged over the grid — and the rank correlation of each selection score (TBL's
-recognition margin, static selection's valley measure r) with that usefulness; and, as a bound
-rather than a method, the area of the 16 candidates that proved most useful.
+recognition margin, static selection's valley measure r) with that usefulness; as a bound
+rather than a method, the area of the 16 candidates that proved most useful; and the area
+of static selection held to the light test TBL's sets must pass (``keep_in_light``).
 """
 
 from __future__ import annotations
@@ -28,7 +29,9 @@ import numpy as np
 
 from daemon.config import load
 from daemon.errors import PlacecellError
+from daemon.mapping.tbl import keep_in_light
 from daemon.vision.landmarks import LandmarkSet
+from daemon.vision.ncc import ncc_under_light
 from daemon.vision.panorama import to_grey
 from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
 from daemon.vision.unwarp import Unwarper
@@ -82,7 +85,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     areas: dict[str, list[float]] = {"tbl": [], "static": []}
     far_counts = []
     correlation: dict[str, list[float]] = {"tbl_score": [], "valley_r": []}
-    oracle_areas = []
+    oracle_areas, static_light_areas = [], []
+    light_gains = (1.0 - config.tbl.light_change, 1.0 + config.tbl.light_change)
     for world, place in zip(worlds, places, strict=True):
         sets: dict[str, LandmarkSet] = {"tbl": place.tbl, "static": place.static,
                                         "candidates": place.candidates}
@@ -128,6 +132,14 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         top = np.argsort(usefulness)[::-1][:16]
         _, _, recognised = _recognised(grid["candidates"][..., top], far["candidates"][:, top])
         oracle_areas.append(int(recognised.sum()) * STEP * STEP)
+        # Static selection held to TBL's light test (keep_in_light): static's 16 best
+        # alone are not, and lose more of their LRP when the light changes.
+        light = np.array([ncc_under_light(t, light_gains)
+                          for t in place.candidates.templates()])
+        held = keep_in_light(place.candidate_valley, light, 16, config.tbl.light_ncc)
+        _, _, recognised = _recognised(grid["candidates"][..., held],
+                                       far["candidates"][:, held])
+        static_light_areas.append(int(recognised.sum()) * STEP * STEP)
     return {
         "world": {"kind": kind, "seed": args.world_seed},
         "config": {"places": args.places, "grid_step_m": STEP, "reach_m": REACH,
@@ -144,6 +156,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             "candidate_usefulness_correlation": {
                 name: round(float(np.mean(v)), 3) for name, v in correlation.items()},
             "oracle_area_m2": round(float(np.mean(oracle_areas)), 3),
+            "static_light_area_m2": round(float(np.mean(static_light_areas)), 3),
         },
     }
 
