@@ -16,16 +16,16 @@ class TblSettings:
                         "recognition margin over the cross (§4.3; daemon/mapping/tbl.py)")
     margin_every: int = setting(4, ge=1, le=100, doc="every n-th frame of the cross, each "
                                 "candidate's best look-alike is searched for in the panorama")
+    margin_cap: float = setting(0.2, gt=0.0, le=2.0, doc="a candidate's margin over its "
+                                "best look-alike counts up to this NCC: beyond it it is "
+                                "unmistakable, and being more so should not outrank being "
+                                "reliably so")
     light_change: float = setting(0.5, ge=0.0, lt=1.0, doc="the kept set must stay "
                                   "recognisable with the light this fraction brighter or "
                                   "dimmer: each template matched against itself so changed, "
                                   "pixels clipped, the set's mean NCC must reach light_ncc")
     light_ncc: float = setting(0.95, ge=0.0, le=1.0, doc="see light_change; candidates "
                                "that hold up replace those that suffer most until it does")
-    margin_cap: float = setting(0.2, gt=0.0, le=2.0, doc="a candidate's margin over its "
-                                "best look-alike counts up to this NCC: beyond it it is "
-                                "unmistakable, and being more so should not outrank being "
-                                "reliably so")
     frame_timeout_s: float = setting(2.0, gt=0.0, le=30.0, doc="no frame this long: refuse")
     move_timeout_s: float = setting(20.0, gt=0.0, le=300.0, doc="one arm may take this long")
     search_cols: int = setting(12, ge=2, le=64, doc="tracking window half-width (columns)")
