@@ -82,8 +82,8 @@ def markers_in_view(world: World, pose: tuple[float, float, float],
                        for r in range(math.ceil(rows[0] - half), math.floor(rows[1] - half) + 1)
                        for c in range(math.ceil(min(ends) - half), math.floor(max(ends) - half) + 1)
                        if 0 <= r <= height - TEMPLATE]
-            if windows and max(windows)[0] > -np.inf:
-                _, row, col = max(windows)
+            distinctness, row, col = max(windows, default=(-np.inf, 0, 0))
+            if distinctness > -np.inf:
                 template = wrapped[row:row + TEMPLATE, col + TEMPLATE:col + 2 * TEMPLATE]
                 landmarks.append(Landmark(template.copy(), row, col,
                                           centre_bearing(col, width)))

@@ -88,32 +88,31 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     oracle_areas, static_light_areas = [], []
     light_gains = (1.0 - config.tbl.light_change, 1.0 + config.tbl.light_change)
     for world, place in zip(worlds, places, strict=True):
-        sets: dict[str, LandmarkSet] = {"tbl": place.tbl, "static": place.static,
-                                        "candidates": place.candidates}
-        prepared = {name: PreparedTemplates.of(s.templates()) for name, s in sets.items()}
+        # Both sets are drawn from TBL's candidates (same templates): match the candidates
+        # once and take each set's columns.
+        templates = PreparedTemplates.of(place.candidates.templates())
+        columns = {"tbl": _columns(place.candidates, place.tbl),
+                   "static": _columns(place.candidates, place.static)}
         far_views = [PreparedPanorama.of(to_grey(view(place, unwarper, pose, rng)))
                      for pose in _far_poses(place, world, rng)]
         if not far_views:
             raise PlacecellError(f"{world}: no free pose beyond {REACH + 0.5} m of the place "
                                  "to measure the background LRP at")
         far_counts.append(len(far_views))
-        # Best NCC of every template: at the far poses (n_far, n), on the grid (ny, nx, n).
-        far = {name: np.array([matcher.best_ncc(p, t) for p in far_views])
-               for name, t in prepared.items()}
+        # Best NCC of every candidate: at the far poses (n_far, n), on the grid (ny, nx, n).
+        far = np.array([matcher.best_ncc(p, templates) for p in far_views])
         x0, y0, yaw = place.pose
         offsets = np.arange(-REACH, REACH + 1e-9, STEP)
-        grid = {name: np.full((len(offsets), len(offsets), len(t.norms)), np.nan)
-                for name, t in prepared.items()}
+        grid = np.full((len(offsets), len(offsets), len(templates.norms)), np.nan)
         for j, dx in enumerate(offsets):
             for i, dy in enumerate(offsets):
                 x, y = x0 + dx, y0 + dy
                 if not _free(place, x, y):
                     continue
                 pano = PreparedPanorama.of(to_grey(view(place, unwarper, (x, y, yaw), rng)))
-                for name, t in prepared.items():
-                    grid[name][i, j] = matcher.best_ncc(pano, t)
-        for name in ("tbl", "static"):
-            values, background, recognised = _recognised(grid[name], far[name])
+                grid[i, j] = matcher.best_ncc(pano, templates)
+        for name, at in columns.items():
+            values, background, recognised = _recognised(grid[..., at], far[:, at])
             areas[name].append(int(recognised.sum()) * STEP * STEP)
             if args.plots:
                 plots.grid(Path(args.plots) / f"range-{len(areas[name]) - 1:02d}-{name}.png",
@@ -122,23 +121,21 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                            hi=float(np.nanmax(values)), cell_m=STEP)
         # Which selection score predicts a candidate's own usefulness for recognition: how
         # far its best NCC stands above its own background, averaged over the grid.
-        usefulness = np.nanmean(grid["candidates"] - np.median(far["candidates"], axis=0),
-                                axis=(0, 1))
+        usefulness = np.nanmean(grid - np.median(far, axis=0), axis=(0, 1))
         correlation["tbl_score"].append(_rank_correlation(
             np.array([lm.score for lm in place.candidates.landmarks]), usefulness))
         correlation["valley_r"].append(_rank_correlation(place.candidate_valley, usefulness))
         # Not a method (it ranks by the test views themselves): the area the 16 most useful
         # candidates reach: what a score of single candidates could at best achieve.
         top = np.argsort(usefulness)[::-1][:16]
-        _, _, recognised = _recognised(grid["candidates"][..., top], far["candidates"][:, top])
+        _, _, recognised = _recognised(grid[..., top], far[:, top])
         oracle_areas.append(int(recognised.sum()) * STEP * STEP)
         # Static selection held to TBL's light test (keep_in_light): static's 16 best
         # alone are not, and lose more of their LRP when the light changes.
         light = np.array([ncc_under_light(t, light_gains)
                           for t in place.candidates.templates()])
         held = keep_in_light(place.candidate_valley, light, 16, config.tbl.light_ncc)
-        _, _, recognised = _recognised(grid["candidates"][..., held],
-                                       far["candidates"][:, held])
+        _, _, recognised = _recognised(grid[..., held], far[:, held])
         static_light_areas.append(int(recognised.sum()) * STEP * STEP)
     return {
         "world": {"kind": kind, "seed": args.world_seed},
@@ -159,6 +156,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             "static_light_area_m2": round(float(np.mean(static_light_areas)), 3),
         },
     }
+
+
+def _columns(candidates: LandmarkSet, subset: LandmarkSet) -> list[int]:
+    """Where each landmark of ``subset`` stands among ``candidates`` (same template, same
+    place in the reference panorama)."""
+    index = {(lm.row, lm.col): i for i, lm in enumerate(candidates.landmarks)}
+    return [index[lm.row, lm.col] for lm in subset.landmarks]
 
 
 def _recognised(grid_best: np.ndarray, far_best: np.ndarray
