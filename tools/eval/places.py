@@ -27,6 +27,7 @@ class LearnedPlace:
     renderer: Renderer
     candidates: LandmarkSet  # all TBL candidates, with their TBL scores and depths
     candidate_valley: np.ndarray  # their valley measure r from static selection, same order
+    candidate_light_ncc: np.ndarray  # their self-match under TBL's light test, same order
 
 
 def learn(world: str, pose: tuple[float, float, float], seed: int,
@@ -49,7 +50,8 @@ def learn(world: str, pose: tuple[float, float, float], seed: int,
     # the noise in two other frames.
     static = tbl.candidates.best(16)
     return LearnedPlace(reference, tbl.result(), static, robot.renderer, tbl.scored(),
-                        np.array([lm.score for lm in tbl.candidates.landmarks]))
+                        np.array([lm.score for lm in tbl.candidates.landmarks]),
+                        tbl.light_ncc)
 
 
 def view(place: LearnedPlace, unwarper: Unwarper, pose: tuple[float, float, float],

@@ -31,7 +31,6 @@ from daemon.config import load
 from daemon.errors import PlacecellError
 from daemon.mapping.tbl import keep_in_light
 from daemon.vision.landmarks import LandmarkSet
-from daemon.vision.ncc import ncc_under_light
 from daemon.vision.panorama import to_grey
 from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
 from daemon.vision.unwarp import Unwarper
@@ -86,7 +85,6 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     far_counts = []
     correlation: dict[str, list[float]] = {"tbl_score": [], "valley_r": []}
     oracle_areas, static_light_areas = [], []
-    light_gains = (1.0 - config.tbl.light_change, 1.0 + config.tbl.light_change)
     for world, place in zip(worlds, places, strict=True):
         # Both sets are drawn from TBL's candidates (same templates): match the candidates
         # once and take each set's columns.
@@ -132,9 +130,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         oracle_areas.append(int(recognised.sum()) * STEP * STEP)
         # Static selection held to TBL's light test (keep_in_light): static's 16 best
         # alone are not, and lose more of their LRP when the light changes.
-        light = np.array([ncc_under_light(t, light_gains)
-                          for t in place.candidates.templates()])
-        held = keep_in_light(place.candidate_valley, light, 16, config.tbl.light_ncc)
+        held = keep_in_light(place.candidate_valley, place.candidate_light_ncc, 16,
+                             config.tbl.light_ncc)
         _, _, recognised = _recognised(grid[..., held], far[:, held])
         static_light_areas.append(int(recognised.sum()) * STEP * STEP)
     return {
