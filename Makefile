@@ -23,7 +23,8 @@ test: $(STAMP)
 	$(MAKE) lint typecheck pytest
 
 lint: $(STAMP)
-	$(BIN)/ruff check daemon hal tools tests
+	$(BIN)/ruff check kernel daemon hal tools tests
+	$(BIN)/lint-imports
 
 typecheck: $(STAMP)
 	$(BIN)/mypy

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from daemon import config as config_mod
-from daemon.errors import PlacecellError
+from kernel.errors import PlacecellError
 
 log = logging.getLogger("placecelld")
 

@@ -12,14 +12,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from daemon.errors import ConfigError
-from daemon.mapping.settings import TblSettings
-from daemon.settings import as_dict, build, read_toml, setting
-from daemon.vision.settings import MirrorSettings, PanoramaSettings
+from daemon.mapping.settings import MappingSettings, OdometryNoiseSettings, TblSettings
 from hal.base.settings import BaseSettings
 from hal.camera.settings import CameraSettings
 from hal.registry import BASE_BACKENDS, CAMERA_BACKENDS
 from hal.sim.settings import SimSettings
+from kernel.errors import ConfigError
+from kernel.sensor_settings import MirrorSettings, PanoramaSettings
+from kernel.settings import as_dict, build, read_toml, setting
 
 _ROBOT_NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 
@@ -72,6 +72,8 @@ class PlacecellConfig:
     panorama: PanoramaSettings = setting(default_factory=PanoramaSettings)
     sim: SimSettings = setting(default_factory=SimSettings)
     tbl: TblSettings = setting(default_factory=TblSettings)
+    mapping: MappingSettings = setting(default_factory=MappingSettings)
+    odometry: OdometryNoiseSettings = setting(default_factory=OdometryNoiseSettings)
     zenoh: ZenohSettings = setting(default_factory=ZenohSettings)
     map: MapSettings = setting(default_factory=MapSettings)
     service: ServiceSettings = setting(default_factory=ServiceSettings)

@@ -22,9 +22,9 @@ from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from daemon.errors import DeviceInitError, DeviceIOError
 from hal.base.base import BaseStatus, Odometry
 from hal.camera.base import Frame
+from kernel.errors import DeviceInitError, DeviceIOError
 
 TOPIC_FRAMES = "/camera/image/compressed"
 TOPIC_ODOMETRY = "/base/odometry"

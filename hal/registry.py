@@ -10,7 +10,7 @@ import importlib
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-from daemon.errors import BackendUnavailableError, UnknownBackendError
+from kernel.errors import BackendUnavailableError, UnknownBackendError
 
 CAMERA_BACKENDS: dict[str, str] = {
     "sim": "hal.camera.sim:SimCamera",

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from daemon import config
-from daemon.errors import ConfigError
+from kernel.errors import ConfigError
 from tests.daemon_harness import DEFAULT_CONFIG, REPO
 
 

@@ -11,7 +11,6 @@ import pytest
 from daemon.vision.depth_ekf import BearingOnlyEKF, observation_variance
 from daemon.vision.landmarks import TEMPLATE, centre_bearing
 from daemon.vision.ncc import ncc, ncc_map, ncc_under_light, subpixel_peak
-from daemon.vision.panorama import add_wrap_margin
 from daemon.vision.recognition import (
     FastMatcher,
     PreparedPanorama,
@@ -21,6 +20,7 @@ from daemon.vision.recognition import (
 )
 from daemon.vision.selection import select_static, valley_measure
 from daemon.vision.tracking import predict_column, track
+from kernel.panorama import add_wrap_margin
 
 
 def _textured(shape: tuple[int, int], seed: int, smooth: int = 3) -> np.ndarray:

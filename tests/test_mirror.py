@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from daemon.vision.mirror import MirrorModel, hyperboloid_elevation, hyperboloid_radius
-from daemon.vision.settings import MirrorSettings, PanoramaSettings
+from kernel.mirror import MirrorModel, hyperboloid_elevation, hyperboloid_radius
+from kernel.sensor_settings import MirrorSettings, PanoramaSettings
 
 A, B, F = MirrorSettings().a_m, MirrorSettings().b_m, MirrorSettings().focal_px
 

@@ -16,7 +16,6 @@ from mcap.reader import make_reader
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
 
-from daemon.errors import DeviceInitError, DeviceIOError
 from hal.recording import (
     TOPIC_FRAMES,
     TOPIC_GROUND_TRUTH,
@@ -26,6 +25,7 @@ from hal.recording import (
 )
 from hal.registry import HalContext, create_base, create_camera
 from hal.sim.factory import shared_sim_robot
+from kernel.errors import DeviceInitError, DeviceIOError
 from tests.daemon_harness import (
     REPO,
     client_session,

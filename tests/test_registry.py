@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from daemon.errors import BackendUnavailableError, UnknownBackendError
 from hal import registry
+from kernel.errors import BackendUnavailableError, UnknownBackendError
 
 
 def test_unknown_backend_lists_the_known_ones() -> None:

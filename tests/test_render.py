@@ -8,10 +8,10 @@ import cv2
 import numpy as np
 import pytest
 
-from daemon.vision.panorama import bearing_of_column, elevation_of_row
-from daemon.vision.settings import MirrorSettings, PanoramaSettings
 from hal.sim.render import CAMERA_BODY_BGR, Person, Renderer
 from hal.sim.world import Wall, World, load_world
+from kernel.panorama import bearing_of_column, elevation_of_row
+from kernel.sensor_settings import MirrorSettings, PanoramaSettings
 
 HALF_X, HALF_Y = 4.0, 3.0  # a plain green 8 x 6 m room centred on the origin
 GREEN = (40, 170, 40)

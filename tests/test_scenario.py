@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from daemon.errors import ConfigError
 from hal.sim.factory import build_sim_robot
 from hal.sim.scenario import Walker, load_scenario, scenario_from_dict
+from kernel.errors import ConfigError
 from tests.daemon_harness import REPO
 from tests.sim_helpers import lockstep_config
 

@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from daemon.errors import CommandRejectedError
 from hal.registry import HalContext, create_base, create_camera
 from hal.sim.factory import build_sim_robot
 from hal.sim.robot import SimRobot
 from hal.sim.scenario import load_scenario
+from kernel.errors import CommandRejectedError
 from tests.daemon_harness import REPO
 from tests.sim_helpers import lockstep_config, with_sections
 

@@ -10,7 +10,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from daemon.errors import LearningAbortedError, LearningError
 from daemon.mapping.settings import TblSettings
 from daemon.mapping.tbl import Progress, _zoom, cross_legs, keep_in_light
 from daemon.service.learning import learn_place, run_tbl
@@ -19,6 +18,7 @@ from daemon.vision.selection import select_static
 from daemon.vision.unwarp import Unwarper
 from hal.registry import HalContext, create_base, create_camera
 from hal.sim.factory import shared_sim_robot
+from kernel.errors import LearningAbortedError, LearningError
 from tests.daemon_harness import REPO
 from tests.sim_helpers import lockstep_config, with_sections
 

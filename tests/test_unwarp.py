@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from daemon.vision.mirror import MirrorModel
-from daemon.vision.panorama import bearing_of_column, core_of, elevation_of_row
-from daemon.vision.settings import MirrorSettings, PanoramaSettings
 from daemon.vision.unwarp import Unwarper
+from kernel.mirror import MirrorModel
+from kernel.panorama import bearing_of_column, core_of, elevation_of_row
+from kernel.sensor_settings import MirrorSettings, PanoramaSettings
 
 
 def _brightness(bearing: np.ndarray, elevation: np.ndarray) -> np.ndarray:

@@ -10,16 +10,16 @@ import numpy as np
 import pytest
 
 from daemon.config import load
-from daemon.vision.mirror import MirrorModel, hyperboloid_radius
-from daemon.vision.panorama import (
+from daemon.vision.unwarp import Unwarper
+from hal.sim.render import Renderer
+from hal.sim.world import Decoration, Wall, World, load_world
+from kernel.mirror import MirrorModel, hyperboloid_radius
+from kernel.panorama import (
     add_wrap_margin,
     bearing_of_column,
     column_of_bearing,
     core_of,
 )
-from daemon.vision.unwarp import Unwarper
-from hal.sim.render import Renderer
-from hal.sim.world import Decoration, Wall, World, load_world
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:

@@ -12,17 +12,17 @@ import numpy as np
 import pytest
 
 from daemon.config import load
-from daemon.errors import (
-    BackendUnavailableError,
-    DeviceInitError,
-    DeviceIOError,
-    DeviceTimeoutError,
-)
 from hal import registry
 from hal.camera.settings import V4L2Settings
 from hal.camera.v4l2 import V4L2Camera
 from hal.sim.render import Renderer
 from hal.sim.world import load_world
+from kernel.errors import (
+    BackendUnavailableError,
+    DeviceInitError,
+    DeviceIOError,
+    DeviceTimeoutError,
+)
 
 
 def test_missing_device_names_the_path() -> None:

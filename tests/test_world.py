@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from daemon.config import load
-from daemon.errors import ConfigError
 from hal.sim.render import Person, Renderer
 from hal.sim.world import load_world, save_world
 from hal.sim.worldgen import KINDS
+from kernel.errors import ConfigError
 
 REPO = Path(__file__).resolve().parent.parent
 

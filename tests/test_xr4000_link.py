@@ -13,12 +13,12 @@ from typing import Any
 
 import pytest
 
-from daemon.errors import DeviceIOError, DeviceTimeoutError
 from hal.base.base import Odometry
 from hal.base.settings import Xr4000CanSettings, Xr4000SerialSettings
 from hal.base.xr4000_can import Xr4000CanBase
 from hal.base.xr4000_serial import Xr4000SerialBase
 from hal.sim.factory import build_sim_robot
+from kernel.errors import DeviceIOError, DeviceTimeoutError
 from tests.links import emulator, pty_pair, stop
 from tests.sim_helpers import lockstep_config
 from tools.xr4000.emulator import Emulator, SimSource

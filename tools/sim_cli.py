@@ -11,7 +11,7 @@ import importlib
 import logging
 import sys
 
-from daemon.errors import PlacecellError
+from kernel.errors import PlacecellError
 
 # subcommand -> (module, one-line help)
 SUBCOMMANDS = {

@@ -21,9 +21,9 @@ import threading
 from pathlib import Path
 
 from daemon import config as config_mod
-from daemon.errors import PlacecellError
 from hal.sim.factory import build_sim_robot
 from hal.sim.scenario import load_scenario
+from kernel.errors import PlacecellError
 from tools.xr4000.emulator import Emulator, RecordingSource, SimSource
 from tools.xr4000.faults import FaultPlan
 from tools.xr4000.transport import CanSide, SerialSide

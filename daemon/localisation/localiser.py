@@ -15,10 +15,9 @@ from typing import Literal
 import numpy as np
 
 from daemon.localisation.odometry import OdometryBuffer, relative_motion
-from daemon.vision.settings import MirrorSettings, PanoramaSettings
 from daemon.vision.unwarp import Unwarper
-from hal.base.base import Odometry
-from hal.camera.base import Frame
+from kernel.sensor_settings import MirrorSettings, PanoramaSettings
+from kernel.types import Frame, Odometry
 
 BeliefState = Literal["uninitialised", "tracking", "lost", "relocalising"]
 

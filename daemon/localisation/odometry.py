@@ -7,8 +7,8 @@ import math
 from collections import deque
 from collections.abc import Iterable
 
-from daemon.vision.panorama import wrap_angle
-from hal.base.base import Odometry
+from kernel.angles import wrap_angle
+from kernel.types import Odometry
 
 
 class OdometryBuffer:

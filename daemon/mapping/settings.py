@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
-from daemon.settings import setting
+from kernel.settings import setting
 
 
 @dataclass(frozen=True)
@@ -50,3 +51,31 @@ class TblSettings:
         "at most this much larger or smaller than in the reference (template matching is not "
         "scale invariant: beyond it a track slides off; the thesis shortened its cross toward "
         "the corridor walls, §4.6.4)")
+
+
+@dataclass(frozen=True)
+class OdometryNoiseSettings:
+    """How uncertain the base's odometry is (SPEC §6: a transition's covariance grows with
+    the distance driven between the two reference poses). Random parts grow with the square
+    root of the distance; the unknown systematic parts (a scale error and a heading drift
+    per metre) are carried as states, so their effect grows with the distance itself."""
+
+    translation_m_per_sqrt_m: float = setting(
+        0.015, ge=0.0, le=1.0, doc="random position error per sqrt(metre) driven")
+    heading_rad_per_sqrt_m: float = setting(
+        0.005, ge=0.0, le=1.0, doc="random heading error per sqrt(metre) driven")
+    scale_sigma: float = setting(
+        0.01, ge=0.0, le=0.5, doc="std of the unknown fractional error of distances")
+    heading_drift_sigma_rad_per_m: float = setting(
+        0.025, ge=0.0, le=1.0, doc="std of the unknown heading drift per metre driven")
+    max_gap_s: float = setting(
+        1.0, gt=0.0, le=60.0, doc="odometry silent longer than this breaks the run: no "
+        "transition from odometry across the gap")
+
+
+@dataclass(frozen=True)
+class MappingSettings:
+    """Place learning in the running daemon (SPEC §6, §11)."""
+
+    mode: Literal["mapping", "localisation"] = setting(
+        "mapping", doc="mapping: places may be learned; localisation: the map is read-only")

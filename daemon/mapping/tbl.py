@@ -33,16 +33,16 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from daemon.errors import LearningError
 from daemon.mapping.settings import TblSettings
 from daemon.vision.depth_ekf import BearingOnlyEKF
 from daemon.vision.landmarks import LandmarkSet
 from daemon.vision.ncc import ncc_under_light
-from daemon.vision.panorama import to_grey
 from daemon.vision.recognition import best_ncc_elsewhere
 from daemon.vision.selection import select_static
 from daemon.vision.tracking import column_to_bearing_of_centre, predict_column, track
-from hal.base.base import Odometry
+from kernel.errors import LearningError
+from kernel.panorama import to_grey
+from kernel.types import Odometry
 
 
 @dataclass(frozen=True)

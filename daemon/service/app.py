@@ -17,7 +17,6 @@ import zenoh
 import daemon
 from daemon.config import PlacecellConfig
 from daemon.localisation.localiser import Belief, Localiser
-from daemon.mapping.store import MapStore
 from daemon.service import zenoh_link
 from daemon.service.components import (
     LatestFrame,
@@ -28,8 +27,9 @@ from daemon.service.components import (
 )
 from daemon.service.notify import Notifier
 from daemon.service.supervisor import Supervisor, describe
-from daemon.vision.panorama import geometry_checksum
+from daemon.store.sqlite_store import MapStore
 from hal.registry import HalContext, create_base, create_camera
+from kernel.panorama import geometry_checksum
 
 log = logging.getLogger(__name__)
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from daemon.errors import PlacecellError
 from hal.registry import HalContext, create_base, create_camera
+from kernel.errors import PlacecellError
 
 FRAMES = 10
 SECONDS = 2.0

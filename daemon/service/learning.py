@@ -9,14 +9,13 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from daemon.errors import DeviceTimeoutError, HalError, LearningAbortedError, LearningError
 from daemon.localisation.odometry import OdometryBuffer
 from daemon.mapping.settings import TblSettings
 from daemon.mapping.tbl import CandidateChooser, Progress, TurnBackAndLook
 from daemon.vision.landmarks import LandmarkSet
 from daemon.vision.unwarp import Unwarper
-from hal.base.base import Odometry
-from hal.camera.base import Frame
+from kernel.errors import DeviceTimeoutError, HalError, LearningAbortedError, LearningError
+from kernel.types import Frame, Odometry
 
 log = logging.getLogger(__name__)
 

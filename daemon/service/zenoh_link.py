@@ -13,7 +13,7 @@ from typing import Any
 
 import zenoh
 
-from daemon.errors import ConfigError
+from kernel.errors import ConfigError
 
 log = logging.getLogger(__name__)
 

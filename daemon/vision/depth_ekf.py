@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from daemon.vision.panorama import wrap_angle
+from kernel.angles import wrap_angle
 
 
 @dataclass(frozen=True)

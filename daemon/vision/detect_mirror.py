@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from daemon.errors import PlacecellError
+from kernel.errors import PlacecellError
 
 
 class MirrorNotFoundError(PlacecellError):

@@ -1,7 +1,7 @@
 """Landmarks and landmark sets: what a place is made of (SPEC §3, thesis chapter 4).
 
 Positions are in panorama array coordinates (with wrap margin): ``col``/``row`` of the
-template's top-left pixel. Bearings follow daemon/vision/panorama.py.
+template's top-left pixel. Bearings follow kernel/panorama.py.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from daemon.vision.panorama import bearing_of_column
+from kernel.panorama import bearing_of_column
 
 TEMPLATE = 16  # template side, pixels (§4.2)
 

@@ -33,7 +33,7 @@ import numpy as np
 
 from daemon.vision.landmarks import TEMPLATE, LandmarkSet
 from daemon.vision.ncc import ncc_map
-from daemon.vision.panorama import add_wrap_margin, core_of
+from kernel.panorama import add_wrap_margin, core_of
 
 
 def best_ncc_bruteforce(panorama_grey: np.ndarray, templates: np.ndarray) -> np.ndarray:

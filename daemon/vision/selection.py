@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 from daemon.vision.landmarks import TEMPLATE, Landmark, LandmarkSet, centre_bearing
-from daemon.vision.panorama import add_wrap_margin, core_of, to_grey
+from kernel.panorama import add_wrap_margin, core_of, to_grey
 
 SHIFT = 8  # a 32 x 32 window around a 16 x 16 template: shifts of -8..8
 MIN_TEXTURE = 6.0  # grey-level std below which a window is too flat to be a landmark

@@ -15,7 +15,7 @@ import numpy as np
 
 from daemon.vision.landmarks import TEMPLATE
 from daemon.vision.ncc import ncc_map, subpixel_peak
-from daemon.vision.panorama import TWO_PI, column_of_bearing, core_of
+from kernel.panorama import TWO_PI, column_of_bearing, core_of
 
 
 @dataclass(frozen=True)

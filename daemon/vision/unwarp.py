@@ -11,9 +11,9 @@ import math
 import cv2
 import numpy as np
 
-from daemon.vision.mirror import MirrorModel
-from daemon.vision.panorama import bearing_of_column, elevation_of_row, geometry_checksum
-from daemon.vision.settings import MirrorSettings, PanoramaSettings
+from kernel.mirror import MirrorModel
+from kernel.panorama import bearing_of_column, elevation_of_row, geometry_checksum
+from kernel.sensor_settings import MirrorSettings, PanoramaSettings
 
 
 class Unwarper:

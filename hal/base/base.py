@@ -6,20 +6,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
-
-@dataclass(frozen=True)
-class Odometry:
-    """Absolute odometry pose of the base in its odometry frame.
-
-    x, y in metres, yaw in radians wrapped to (-pi, pi]; stamp_ns on the monotonic clock
-    shared with the camera; seq is the controller's sample counter.
-    """
-
-    x: float
-    y: float
-    yaw: float
-    stamp_ns: int
-    seq: int
+from kernel.types import Odometry
 
 
 @dataclass(frozen=True)

@@ -7,11 +7,11 @@ import time
 from collections.abc import Iterator, Mapping
 from typing import Any
 
-from daemon.errors import CommandRejectedError, DeviceInitError, DeviceIOError, DeviceTimeoutError
 from hal.base.base import BaseInfo, BaseStatus, Odometry
 from hal.base.settings import ReplayBaseSettings
 from hal.recording import TOPIC_ODOMETRY, Message, RecordingReader, decode_odometry
 from hal.replay import ReplayClock, shared_clock
+from kernel.errors import CommandRejectedError, DeviceInitError, DeviceIOError, DeviceTimeoutError
 
 
 class ReplayBase:

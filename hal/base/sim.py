@@ -5,11 +5,11 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from daemon.errors import CommandRejectedError, DeviceTimeoutError
 from hal.base.base import BaseInfo, BaseStatus, Odometry
 from hal.base.settings import SimBaseSettings
 from hal.sim.factory import shared_sim_robot
 from hal.sim.robot import SimRobot
+from kernel.errors import CommandRejectedError, DeviceTimeoutError
 
 
 class SimBase:

@@ -15,12 +15,6 @@ from typing import Any
 
 import can
 
-from daemon.errors import (
-    BackendUnavailableError,
-    DeviceInitError,
-    DeviceIOError,
-    DeviceTimeoutError,
-)
 from hal.base.settings import Xr4000CanSettings
 from hal.base.xr4000_link import Xr4000Link
 from hal.base.xr4000_protocol import (
@@ -33,6 +27,12 @@ from hal.base.xr4000_protocol import (
     CanIds,
     can_move,
     can_velocity,
+)
+from kernel.errors import (
+    BackendUnavailableError,
+    DeviceInitError,
+    DeviceIOError,
+    DeviceTimeoutError,
 )
 
 FORBIDDEN_INTERFACES = {"udp_multicast"}  # its traffic leaves the machine

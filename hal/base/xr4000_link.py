@@ -13,14 +13,14 @@ import threading
 import time
 from collections.abc import Mapping
 
-from daemon.errors import (
+from hal.base.base import BaseInfo, BaseStatus, Odometry
+from hal.base.xr4000_protocol import OdometryValidator, OdoMsg, StaMsg
+from kernel.errors import (
     CommandRejectedError,
     DeviceIOError,
     DeviceTimeoutError,
     HalError,
 )
-from hal.base.base import BaseInfo, BaseStatus, Odometry
-from hal.base.xr4000_protocol import OdometryValidator, OdoMsg, StaMsg
 
 log = logging.getLogger(__name__)
 

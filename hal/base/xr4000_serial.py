@@ -10,7 +10,6 @@ from typing import Any
 
 import serial
 
-from daemon.errors import DeviceInitError, DeviceIOError, DeviceTimeoutError
 from hal.base.settings import Xr4000SerialSettings
 from hal.base.xr4000_link import Xr4000Link
 from hal.base.xr4000_protocol import (
@@ -23,6 +22,7 @@ from hal.base.xr4000_protocol import (
     VelCmd,
     encode_message,
 )
+from kernel.errors import DeviceInitError, DeviceIOError, DeviceTimeoutError
 
 
 class Xr4000SerialBase(Xr4000Link):

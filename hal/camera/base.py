@@ -6,22 +6,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
-import numpy as np
-
-
-@dataclass(frozen=True)
-class Frame:
-    """One camera frame.
-
-    image: ``uint8`` raw camera image, ``(H, W, 3)`` BGR or ``(H, W)`` grey.
-    stamp_ns: capture time on the monotonic clock shared with odometry (``time.monotonic_ns``
-      on the robot; the simulated clock in lock-step simulation).
-    seq: the device's frame counter; a jump means frames were lost.
-    """
-
-    image: np.ndarray
-    stamp_ns: int
-    seq: int
+from kernel.types import Frame
 
 
 @dataclass(frozen=True)

@@ -13,9 +13,9 @@ from typing import Any
 
 from picamera2 import Picamera2
 
-from daemon.errors import DeviceInitError, DeviceIOError, DeviceTimeoutError
 from hal.camera.base import CameraInfo, Frame
 from hal.camera.settings import LibcameraSettings
+from kernel.errors import DeviceInitError, DeviceIOError, DeviceTimeoutError
 
 
 class LibcameraCamera:

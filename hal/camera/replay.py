@@ -6,11 +6,11 @@ import time
 from collections.abc import Iterator, Mapping
 from typing import Any
 
-from daemon.errors import DeviceInitError, DeviceIOError, DeviceTimeoutError
 from hal.camera.base import CameraInfo, Frame
 from hal.camera.settings import ReplayCameraSettings
 from hal.recording import TOPIC_FRAMES, Message, RecordingReader, decode_frame
 from hal.replay import ReplayClock, shared_clock
+from kernel.errors import DeviceInitError, DeviceIOError, DeviceTimeoutError
 
 
 class ReplayCamera:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-from daemon.settings import setting
+from kernel.settings import setting
 
 
 @dataclass(frozen=True)

@@ -5,11 +5,11 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from daemon.errors import DeviceTimeoutError
 from hal.camera.base import CameraInfo, Frame
 from hal.camera.settings import SimCameraSettings
 from hal.sim.factory import shared_sim_robot
 from hal.sim.robot import SimRobot
+from kernel.errors import DeviceTimeoutError
 
 
 class SimCamera:

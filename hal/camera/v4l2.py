@@ -18,9 +18,9 @@ from typing import Any, Protocol
 import cv2
 import numpy as np
 
-from daemon.errors import DeviceInitError, DeviceIOError, DeviceTimeoutError
 from hal.camera.base import CameraInfo, Frame
 from hal.camera.settings import V4L2Settings
+from kernel.errors import DeviceInitError, DeviceIOError, DeviceTimeoutError
 
 log = logging.getLogger(__name__)
 

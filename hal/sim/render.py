@@ -17,11 +17,11 @@ from statistics import NormalDist
 import cv2
 import numpy as np
 
-from daemon.vision.mirror import MirrorModel, hyperboloid_radius
-from daemon.vision.panorama import bearing_of_column
-from daemon.vision.settings import MirrorSettings, PanoramaSettings
 from hal.sim import textures
 from hal.sim.world import World
+from kernel.mirror import MirrorModel, hyperboloid_radius
+from kernel.panorama import bearing_of_column
+from kernel.sensor_settings import MirrorSettings, PanoramaSettings
 
 PX = textures.PX_PER_M
 SUPERSAMPLE = 2

@@ -20,14 +20,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from daemon.errors import CommandRejectedError, DeviceInitError
-from daemon.vision.panorama import wrap_angle
 from hal.base.base import BaseStatus, Odometry
 from hal.base.settings import SimBaseSettings
 from hal.camera.base import Frame
 from hal.camera.settings import SimCameraSettings
 from hal.sim.render import Renderer
 from hal.sim.scenario import Scenario
+from kernel.angles import wrap_angle
+from kernel.errors import CommandRejectedError, DeviceInitError
 
 
 @dataclass

@@ -12,10 +12,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from daemon.errors import ConfigError
-from daemon.settings import read_toml
-from daemon.vision.panorama import wrap_angle
 from hal.sim.render import Person
+from kernel.angles import wrap_angle
+from kernel.errors import ConfigError
+from kernel.settings import read_toml
 
 Pose = tuple[float, float, float]
 

@@ -11,9 +11,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from daemon.errors import ConfigError
-from daemon.settings import read_toml
 from hal.sim.textures import DECORATION_KINDS, WALL_KINDS
+from kernel.errors import ConfigError
+from kernel.settings import read_toml
 
 Colour = tuple[int, int, int]
 

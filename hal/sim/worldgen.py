@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from daemon.errors import ConfigError
 from hal.sim.world import Decoration, Wall, World
+from kernel.errors import ConfigError
 
 KINDS = ("office", "corridor", "aliased-corridor", "open-room")
 WALL_COLOURS = [(200, 205, 210), (170, 190, 200), (185, 200, 185), (150, 170, 200),

@@ -18,7 +18,6 @@ import numpy as np
 
 from daemon.config import load
 from daemon.vision.landmarks import LandmarkSet
-from daemon.vision.panorama import to_grey
 from daemon.vision.recognition import (
     FastMatcher,
     PreparedPanorama,
@@ -30,6 +29,7 @@ from daemon.vision.tracking import track
 from daemon.vision.unwarp import Unwarper
 from hal.sim.render import Renderer
 from hal.sim.world import load_world
+from kernel.panorama import to_grey
 from tools.bench.timing import median_seconds
 
 PLACES = 50

@@ -16,7 +16,7 @@ import logging
 import sys
 from typing import Any
 
-from daemon.errors import PlacecellError
+from kernel.errors import PlacecellError
 
 # experiment -> (module, default world kind, one-line help)
 EXPERIMENTS: dict[str, tuple[str, str, str]] = {

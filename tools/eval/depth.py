@@ -28,9 +28,9 @@ from typing import Any
 import numpy as np
 
 from daemon.config import load
-from daemon.errors import PlacecellError
 from daemon.vision.landmarks import centre_bearing
 from hal.sim.world import load_world
+from kernel.errors import PlacecellError
 from tools.eval import plots
 from tools.eval.markers import markers_in_view
 from tools.eval.places import learn

@@ -13,16 +13,16 @@ import numpy as np
 
 from daemon.mapping.tbl import CandidateChooser
 from daemon.vision.landmarks import TEMPLATE, Landmark, LandmarkSet, centre_bearing
-from daemon.vision.panorama import (
+from daemon.vision.selection import MIN_TEXTURE, texture, valley_measure
+from hal.sim.world import World
+from kernel.panorama import (
     add_wrap_margin,
     column_of_bearing,
     core_of,
     row_of_elevation,
     to_grey,
 )
-from daemon.vision.selection import MIN_TEXTURE, texture, valley_measure
-from daemon.vision.settings import PanoramaSettings
-from hal.sim.world import World
+from kernel.sensor_settings import PanoramaSettings
 
 
 def _markers(world: World) -> list[tuple[tuple[float, float], tuple[float, float], float,

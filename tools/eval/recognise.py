@@ -19,14 +19,14 @@ import cv2
 import numpy as np
 
 from daemon.config import load
-from daemon.errors import PlacecellError
 from daemon.vision.detect_mirror import detect_mirror
 from daemon.vision.landmarks import TEMPLATE, LandmarkSet
-from daemon.vision.panorama import to_grey
 from daemon.vision.recognition import lrp_bruteforce
 from daemon.vision.selection import select_static
-from daemon.vision.settings import MirrorSettings
 from daemon.vision.unwarp import Unwarper
+from kernel.errors import PlacecellError
+from kernel.panorama import to_grey
+from kernel.sensor_settings import MirrorSettings
 
 KEEP = 16
 DRAWS_PLOTS = True  # --plots DIR: the landmarks drawn on each panorama

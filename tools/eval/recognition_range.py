@@ -28,13 +28,13 @@ from typing import Any
 import numpy as np
 
 from daemon.config import load
-from daemon.errors import PlacecellError
 from daemon.mapping.tbl import keep_in_light
 from daemon.vision.landmarks import LandmarkSet
-from daemon.vision.panorama import to_grey
 from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
 from daemon.vision.unwarp import Unwarper
 from hal.sim.world import load_world
+from kernel.errors import PlacecellError
+from kernel.panorama import to_grey
 from tools.eval import plots
 from tools.eval.places import LearnedPlace, learn, view
 

@@ -16,10 +16,10 @@ from typing import Any
 import numpy as np
 
 from daemon.config import load
-from daemon.vision.panorama import to_grey
 from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
 from daemon.vision.unwarp import Unwarper
 from hal.sim.render import Person
+from kernel.panorama import to_grey
 from tools.eval.places import learn, view
 
 

@@ -8,8 +8,8 @@ import math
 import numpy as np
 
 from daemon.vision.landmarks import TEMPLATE
-from daemon.vision.panorama import elevation_of_row
 from hal.sim.render import Renderer
+from kernel.panorama import elevation_of_row
 
 
 def landmark_depth(renderer: Renderer, pose: tuple[float, float, float], bearing: float,

@@ -8,8 +8,8 @@ import json
 
 import cv2
 
-from daemon.errors import PlacecellError
 from daemon.vision.detect_mirror import detect_mirror
+from kernel.errors import PlacecellError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -15,10 +15,10 @@ import cv2
 import numpy as np
 
 from daemon import config as config_mod
-from daemon.errors import PlacecellError
 from daemon.vision.unwarp import Unwarper
 from hal.sim.render import Renderer
 from hal.sim.world import World, load_world
+from kernel.errors import PlacecellError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -19,7 +19,6 @@ from typing import Any
 
 import numpy as np
 
-from daemon.errors import CommandRejectedError
 from hal.base.xr4000_protocol import (
     CMD_MOVE,
     CMD_STOP,
@@ -37,6 +36,7 @@ from hal.base.xr4000_protocol import (
 )
 from hal.recording import TOPIC_ODOMETRY, RecordingReader
 from hal.sim.robot import SimRobot
+from kernel.errors import CommandRejectedError
 from tools.xr4000.faults import FaultInjector, FaultPlan
 from tools.xr4000.transport import CanSide, SerialSide
 

@@ -21,8 +21,8 @@ import math
 
 import numpy as np
 
-from daemon.vision.panorama import elevation_of_row, row_of_elevation
-from daemon.vision.settings import MirrorSettings, PanoramaSettings
+from kernel.panorama import elevation_of_row, row_of_elevation
+from kernel.sensor_settings import MirrorSettings, PanoramaSettings
 
 
 def hyperboloid_radius(phi: np.ndarray, a: float, b: float, focal_px: float) -> np.ndarray:

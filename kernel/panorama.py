@@ -23,14 +23,10 @@ import math
 import cv2
 import numpy as np
 
-TWO_PI = 2.0 * math.pi
+from kernel.angles import TWO_PI, wrap_angle
 
-
-def wrap_angle(a: float | np.ndarray) -> float | np.ndarray:
-    """Wrap to (-pi, pi]."""
-    w = np.mod(np.asarray(a) + math.pi, TWO_PI) - math.pi
-    w = np.where(w == -math.pi, math.pi, w)
-    return float(w) if np.ndim(w) == 0 else w
+__all__ = ["TWO_PI", "wrap_angle", "bearing_of_column", "column_of_bearing", "elevation_of_row",
+           "row_of_elevation", "add_wrap_margin", "core_of", "to_grey", "geometry_checksum"]
 
 
 def bearing_of_column(c: float | np.ndarray, width: int) -> float | np.ndarray:

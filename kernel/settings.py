@@ -16,7 +16,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal, TypeVar, get_args, get_origin
 
-from daemon.errors import ConfigError
+from kernel.errors import ConfigError
 
 T = TypeVar("T")
 

@@ -1,0 +1,62 @@
+"""The topological map in memory: places as nodes, transitions as edges (SPEC §6, ch. 7).
+
+Pure: the service loads it from the map file and adds what it stores. Every transition is
+held both ways, so neighbours are one dictionary lookup.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+from daemon.mapping.place import Place
+from daemon.mapping.transition import Transition
+
+
+class TopologicalMap:
+    def __init__(self, places: Iterable[Place] = (), transitions: Iterable[Transition] = ()
+                 ) -> None:
+        self._places: dict[int, Place] = {}
+        self._edges: dict[int, dict[int, Transition]] = {}
+        for p in places:
+            self.add_place(p)
+        for t in transitions:
+            self.add_transition(t)
+
+    def add_place(self, place: Place) -> None:
+        if place.id <= 0:
+            raise ValueError("a place joins the map with the id the map file gave it")
+        self._places[place.id] = place
+        self._edges.setdefault(place.id, {})
+
+    def add_transition(self, transition: Transition) -> None:
+        """Adds it and its reverse; replaces an earlier measurement between the same two."""
+        for t in transition.both_ways():
+            if t.from_id not in self._places or t.to_id not in self._places:
+                raise KeyError(f"transition {t.from_id} -> {t.to_id}: both places must be in "
+                               "the map")
+            self._edges[t.from_id][t.to_id] = t
+
+    def place(self, place_id: int) -> Place:
+        return self._places[place_id]
+
+    def __contains__(self, place_id: object) -> bool:
+        return place_id in self._places
+
+    def __len__(self) -> int:
+        return len(self._places)
+
+    @property
+    def places(self) -> list[Place]:
+        return list(self._places.values())
+
+    @property
+    def transitions(self) -> list[Transition]:
+        """Every transition, both directions."""
+        return [t for edges in self._edges.values() for t in edges.values()]
+
+    def neighbours(self, place_id: int) -> list[Transition]:
+        """Transitions out of ``place_id``."""
+        return list(self._edges.get(place_id, {}).values())
+
+    def transition(self, from_id: int, to_id: int) -> Transition | None:
+        return self._edges.get(from_id, {}).get(to_id)

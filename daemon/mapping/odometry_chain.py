@@ -1,0 +1,79 @@
+"""The odometry between two reference poses, with the covariance it has earned (SPEC §6).
+
+When a place is learned after another in one unbroken run of odometry, the transition
+between them is the odometry motion from the first reference pose to the second (§7.1.2:
+accurate over short distances). Its covariance is propagated along every odometry step
+with the noise model of :class:`OdometryNoiseSettings`: the state is the pose relative to
+the first reference, (x, y, θ), augmented by the two unknown systematic errors (scale s
+and heading drift per metre b) whose effect grows with the distance, not its root.
+
+For an odometry step u = (dx, dy, dθ) in the robot frame, of length ds, the true step is
+u_true = (dx (1 − s), dy (1 − s), dθ − b ds) + w,  w ~ N(0, diag(σt² ds, σt² ds, σr² ds)),
+so with J₁, J₂ the Jacobians of X ⊕ u (kernel/se2.py) and G = ∂u_true/∂(s, b):
+
+    P' = F P Fᵀ + [J₂ Q J₂ᵀ 0; 0 0],    F = [J₁  J₂ G; 0  I].
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from daemon.mapping.settings import OdometryNoiseSettings
+from kernel.se2 import SE2, UncertainSE2
+from kernel.types import Odometry
+
+
+class OdometryChain:
+    """Motion from a reference odometry sample, fed every later sample in order."""
+
+    def __init__(self, start: Odometry, noise: OdometryNoiseSettings) -> None:
+        self.start = start
+        self.noise = noise
+        self._last = start
+        self._pose = SE2()
+        self._P = np.zeros((5, 5))
+        self._P[3, 3] = noise.scale_sigma ** 2
+        self._P[4, 4] = noise.heading_drift_sigma_rad_per_m ** 2
+        self.distance_m = 0.0
+        self.broken = False
+
+    @property
+    def last(self) -> Odometry:
+        return self._last
+
+    def add(self, sample: Odometry) -> None:
+        """One more odometry sample; a gap longer than ``max_gap_s`` or time going
+        backwards breaks the chain for good."""
+        if self.broken:
+            return
+        gap_s = (sample.stamp_ns - self._last.stamp_ns) / 1e9
+        if gap_s <= 0.0:
+            return  # a repeat or out of order: the odometry buffer counts those
+        if gap_s > self.noise.max_gap_s:
+            self.broken = True
+            return
+        a = SE2(self._last.x, self._last.y, self._last.yaw)
+        u = a.between(SE2(sample.x, sample.y, sample.yaw))
+        self._step(u)
+        self._last = sample
+
+    def _step(self, u: SE2) -> None:
+        n = self.noise
+        ds = math.hypot(u.x, u.y)
+        j1, j2 = self._pose.compose_jacobians(u)
+        G = np.array([[-u.x, 0.0], [-u.y, 0.0], [0.0, -ds]])  # ∂u_true/∂(s, b)
+        F = np.eye(5)
+        F[:3, :3] = j1
+        F[:3, 3:] = j2 @ G
+        Q = np.diag([n.translation_m_per_sqrt_m ** 2 * ds, n.translation_m_per_sqrt_m ** 2 * ds,
+                     n.heading_rad_per_sqrt_m ** 2 * ds])
+        self._P = F @ self._P @ F.T
+        self._P[:3, :3] += j2 @ Q @ j2.T
+        self._pose = self._pose.compose(u)
+        self.distance_m += ds
+
+    def relative(self) -> UncertainSE2:
+        """The last sample's pose in the start sample's frame, with its covariance."""
+        return UncertainSE2(self._pose, self._P[:3, :3].copy())

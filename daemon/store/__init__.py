@@ -1,0 +1,1 @@
+"""The map file: the topological map in one SQLite file, and its folder export (SPEC §6)."""

@@ -1,0 +1,155 @@
+"""Map export to a folder for inspection, and import back (SPEC §6).
+
+A folder holds ``manifest.json`` (format, schema, geometry checksum), ``places.json``
+(every place with its landmarks: row, column, bearing, depth, covariance, score, and the
+template's bytes in base64 so they come back identical), ``transitions.json`` (both
+directions), and per place ``place-<id>.png`` (the reference panorama with its landmarks
+drawn, for people) and ``place-<id>-reference.png`` (the panorama itself, lossless).
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from daemon.mapping.place import Place
+from daemon.mapping.transition import Transition
+from daemon.store.sqlite_store import SCHEMA_VERSION, MapStore
+from daemon.vision.drawing import draw_landmarks
+from daemon.vision.landmarks import TEMPLATE, Landmark, LandmarkSet
+from kernel.errors import MapStoreError
+from kernel.se2 import SE2, UncertainSE2
+
+FORMAT = "placecell.map-export/1"
+
+
+def export_map(store: MapStore, folder: str | Path) -> int:
+    """Write the map to ``folder`` (created; must be empty). Returns the place count."""
+    out = Path(folder)
+    if out.exists() and any(out.iterdir()):
+        raise MapStoreError(f"{out} is not empty: export into a new folder")
+    out.mkdir(parents=True, exist_ok=True)
+    graph = store.load()
+    places = []
+    for place in graph.places:
+        places.append(_place_json(place))
+        _write_png(out / f"place-{place.id}.png",
+                   draw_landmarks(place.reference_panorama, place.landmarks))
+        _write_png(out / f"place-{place.id}-reference.png", place.reference_panorama)
+    transitions = [_transition_json(t) for t in store.transitions()]
+    _write_json(out / "places.json", places)
+    _write_json(out / "transitions.json", transitions)
+    _write_json(out / "manifest.json", {
+        "format": FORMAT, "schema_version": SCHEMA_VERSION,
+        "geometry_checksum": store.meta("geometry_checksum"),
+        "places": len(places), "transitions": len(transitions)})
+    return len(places)
+
+
+def import_map(folder: str | Path, path: str | Path) -> int:
+    """Build a new map file at ``path`` from an exported folder; refuses to overwrite.
+    Place ids are kept. Returns the place count."""
+    src, dst = Path(folder), Path(path)
+    if dst.exists():
+        raise MapStoreError(f"{dst} exists: import into a new file (nothing was changed)")
+    manifest = _read_json(src / "manifest.json")
+    if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
+        raise MapStoreError(f"{src}: not a placecell map export (manifest format "
+                            f"{manifest.get('format') if isinstance(manifest, dict) else '?'})")
+    places_doc = _read_json(src / "places.json")
+    transitions_doc = _read_json(src / "transitions.json")
+    try:
+        places = [_place_from_json(d, src) for d in places_doc]
+        transitions = [_transition_from_json(d) for d in transitions_doc]
+    except (KeyError, TypeError, ValueError) as e:
+        raise MapStoreError(f"{src}: malformed export ({type(e).__name__}: {e})") from e
+    tmp = dst.with_name(dst.name + ".importing")
+    for leftover in (tmp, Path(f"{tmp}-wal"), Path(f"{tmp}-shm")):
+        leftover.unlink(missing_ok=True)
+    store = MapStore.open(tmp, str(manifest["geometry_checksum"]))
+    try:
+        with store:
+            store.import_places(places, transitions)
+        os.replace(tmp, dst)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return len(places)
+
+
+def _place_json(place: Place) -> dict[str, Any]:
+    return {
+        "id": place.id, "label": place.label, "created_unix_s": place.created_unix_s,
+        "background_lrp": place.background_lrp,
+        "local_space": None if place.local_space is None else place.local_space.tolist(),
+        "width": place.landmarks.width, "margin": place.landmarks.margin,
+        "panorama": f"place-{place.id}-reference.png",
+        "landmarks": [{
+            "row": lm.row, "col": lm.col, "bearing": lm.bearing,
+            "depth": None if not np.isfinite(lm.depth) else lm.depth,
+            "covariance": lm.covariance.tolist() if np.all(np.isfinite(lm.covariance))
+            else None,
+            "score": lm.score,
+            "template": base64.b64encode(np.ascontiguousarray(lm.template, np.uint8).tobytes()
+                                         ).decode("ascii"),
+        } for lm in place.landmarks.landmarks],
+    }
+
+
+def _place_from_json(d: dict[str, Any], src: Path) -> Place:
+    lms = []
+    for lm in d["landmarks"]:
+        raw = base64.b64decode(lm["template"], validate=True)
+        if len(raw) != TEMPLATE * TEMPLATE:
+            raise ValueError(f"place {d['id']}: a template has {len(raw)} bytes")
+        cov = np.full((2, 2), np.nan) if lm["covariance"] is None else np.array(
+            lm["covariance"], dtype=float).reshape(2, 2)
+        lms.append(Landmark(np.frombuffer(raw, np.uint8).reshape(TEMPLATE, TEMPLATE).copy(),
+                            int(lm["row"]), int(lm["col"]), float(lm["bearing"]),
+                            float("nan") if lm["depth"] is None else float(lm["depth"]),
+                            cov, float(lm["score"])))
+    pano = cv2.imread(str(src / str(d["panorama"])), cv2.IMREAD_UNCHANGED)
+    if pano is None:
+        raise ValueError(f"place {d['id']}: cannot read {d['panorama']}")
+    ls = d.get("local_space")
+    return Place(LandmarkSet(tuple(lms), int(d["width"]), int(d["margin"])), pano,
+                 label=str(d["label"]), created_unix_s=float(d["created_unix_s"]),
+                 background_lrp=None if d["background_lrp"] is None
+                 else float(d["background_lrp"]),
+                 local_space=None if ls is None else np.array(ls, dtype=float),
+                 id=int(d["id"]))
+
+
+def _transition_json(t: Transition) -> dict[str, Any]:
+    m = t.T_from_to.mean
+    return {"from": t.from_id, "to": t.to_id, "x": m.x, "y": m.y, "yaw": m.yaw,
+            "covariance": t.T_from_to.covariance.tolist(), "source": t.source}
+
+
+def _transition_from_json(d: dict[str, Any]) -> Transition:
+    return Transition(int(d["from"]), int(d["to"]),
+                      UncertainSE2(SE2(float(d["x"]), float(d["y"]), float(d["yaw"])),
+                                   np.array(d["covariance"], dtype=float)),
+                      d["source"])
+
+
+def _write_png(path: Path, image: np.ndarray) -> None:
+    if not cv2.imwrite(str(path), image):
+        raise MapStoreError(f"cannot write {path}")
+
+
+def _write_json(path: Path, doc: Any) -> None:
+    path.write_text(json.dumps(doc, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+
+
+def _read_json(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise MapStoreError(f"cannot read {path}: {e}") from e

@@ -1,0 +1,394 @@
+"""The map file: the topological map in one SQLite file (SPEC §6; docs/design.md, "Map file").
+
+- WAL journal: a reader (``placecellctl map info``, a second process) is never blocked by
+  the daemon writing, and a crash (even SIGKILL) loses at most the place being written.
+- Each place is written with its transitions (both ways) in one transaction: after any
+  crash a place is either complete with its transitions or absent.
+- A schema version with migrations from older versions, and the checksum of the panorama
+  geometry: a map made with another unwarping is refused, never silently misused.
+- Refused files are left byte-for-byte as they were: every check runs on a read-only
+  connection before anything is written.
+- Each place's bytes carry a SHA-256 digest; a damaged place is reported by id.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import logging
+import sqlite3
+import threading
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from daemon.mapping.graph import TopologicalMap
+from daemon.mapping.place import Place
+from daemon.mapping.transition import Transition
+from daemon.store import codec
+from kernel.errors import MapStoreError
+from kernel.se2 import SE2, UncertainSE2
+
+log = logging.getLogger(__name__)
+
+SCHEMA_VERSION = 2
+APPLICATION = "placecell-map"
+
+_SCHEMA_V2 = """
+CREATE TABLE meta (
+    key   TEXT PRIMARY KEY,
+    value TEXT NOT NULL
+);
+CREATE TABLE places (
+    id             INTEGER PRIMARY KEY AUTOINCREMENT,
+    label          TEXT NOT NULL DEFAULT '',
+    created_unix_s REAL NOT NULL,
+    background_lrp REAL,
+    landmark_count INTEGER NOT NULL,
+    landmarks      BLOB NOT NULL,       -- daemon/store/codec.py: npz, no pickles
+    panorama       BLOB NOT NULL,       -- reference panorama, lossless PNG
+    local_space    BLOB,                -- 16 float64 (chapter 5), NULL until measured
+    digest         TEXT NOT NULL        -- sha256 over landmarks, panorama, local_space
+);
+CREATE TABLE transitions (
+    from_id    INTEGER NOT NULL REFERENCES places(id),
+    to_id      INTEGER NOT NULL REFERENCES places(id),
+    x REAL NOT NULL, y REAL NOT NULL, yaw REAL NOT NULL,   -- to's frame in from's (T_from_to)
+    covariance BLOB NOT NULL,                             -- 3x3 float64, little endian
+    source     TEXT NOT NULL,                             -- odometry | cycle
+    PRIMARY KEY (from_id, to_id)
+);
+CREATE INDEX transitions_to ON transitions(to_id);
+"""
+
+
+@dataclass(frozen=True)
+class PlaceSummary:
+    """What ``map/places`` and ``placecellctl places`` show of a place."""
+
+    id: int
+    label: str
+    created_unix_s: float
+    landmark_count: int
+    background_lrp: float | None
+
+
+class MapStore:
+    """An open map file. Use :meth:`open`; close with :meth:`close` (or as a context).
+    One connection shared by the daemon's threads under a lock."""
+
+    def __init__(self, connection: sqlite3.Connection, path: Path, readonly: bool) -> None:
+        self._db = connection
+        self._lock = threading.RLock()
+        self.path = path
+        self.readonly = readonly
+
+    # ------------------------------------------------------------ opening
+    @classmethod
+    def open(cls, path: str | Path, geometry_checksum: str | None, *,
+             readonly: bool = False) -> MapStore:
+        """Open (or, unless ``readonly``, create) the map at ``path``.
+
+        ``geometry_checksum`` None accepts any geometry (offline tools that only read).
+        Raises MapStoreError, leaving the file untouched, for anything that is not a
+        healthy placecell map of this geometry and of a schema this version reads."""
+        p = Path(path)
+        exists = p.exists() and p.stat().st_size > 0
+        if not exists:
+            if readonly:
+                raise MapStoreError(f"{p}: no such map file")
+            return cls._create(p, geometry_checksum)
+        version = _inspect(p, geometry_checksum)
+        if readonly:
+            db = _connect(p, readonly=True)
+            return cls(db, p, readonly=True)
+        db = _connect(p, readonly=False)
+        try:
+            db.execute("PRAGMA journal_mode=WAL")
+            db.execute("PRAGMA foreign_keys=ON")
+            if version < SCHEMA_VERSION:
+                _migrate(db, p, version)
+        except sqlite3.DatabaseError as e:
+            db.close()
+            raise MapStoreError(f"{p}: cannot open the map for writing ({e})") from e
+        return cls(db, p, readonly=False)
+
+    @classmethod
+    def _create(cls, p: Path, geometry_checksum: str | None) -> MapStore:
+        if geometry_checksum is None:
+            raise MapStoreError(f"{p}: a new map needs the panorama geometry's checksum")
+        try:
+            p.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise MapStoreError(f"cannot create the map directory {p.parent}: {e}") from e
+        try:
+            db = _connect(p, readonly=False)
+            db.execute("PRAGMA journal_mode=WAL")
+            db.execute("PRAGMA foreign_keys=ON")
+            with _transaction(db):
+                _create_v2(db)
+                db.executemany("INSERT INTO meta(key, value) VALUES (?, ?)", [
+                    ("application", APPLICATION),
+                    ("schema_version", str(SCHEMA_VERSION)),
+                    ("geometry_checksum", geometry_checksum),
+                    ("created_unix_s", repr(time.time())),
+                ])
+        except sqlite3.DatabaseError as e:
+            raise MapStoreError(f"cannot create the map {p}: {e}") from e
+        log.info("created map %s", p)
+        return cls(db, p, readonly=False)
+
+    # ------------------------------------------------------------ reading
+    def place_count(self) -> int:
+        return int(self._one("SELECT COUNT(*) FROM places")[0])
+
+    def transition_count(self) -> int:
+        """Stored transitions, both directions counted."""
+        return int(self._one("SELECT COUNT(*) FROM transitions")[0])
+
+    def meta(self, key: str) -> str | None:
+        row = self._one("SELECT value FROM meta WHERE key = ?", (key,))
+        return None if row is None else str(row[0])
+
+    def summaries(self) -> list[PlaceSummary]:
+        rows = self._all("SELECT id, label, created_unix_s, landmark_count, background_lrp "
+                         "FROM places ORDER BY id")
+        return [PlaceSummary(int(r[0]), str(r[1]), float(r[2]), int(r[3]),
+                             None if r[4] is None else float(r[4])) for r in rows]
+
+    def place(self, place_id: int) -> Place:
+        row = self._one("SELECT id, label, created_unix_s, background_lrp, landmarks, "
+                        "panorama, local_space, digest FROM places WHERE id = ?", (place_id,))
+        if row is None:
+            raise KeyError(place_id)
+        return self._decode_place(row)
+
+    def panorama_png(self, place_id: int) -> bytes:
+        row = self._one("SELECT panorama FROM places WHERE id = ?", (place_id,))
+        if row is None:
+            raise KeyError(place_id)
+        return bytes(row[0])
+
+    def neighbours(self, place_id: int) -> list[Transition]:
+        """Transitions out of ``place_id`` (indexed: no scan)."""
+        rows = self._all("SELECT from_id, to_id, x, y, yaw, covariance, source FROM "
+                         "transitions WHERE from_id = ?", (place_id,))
+        return [_transition(r) for r in rows]
+
+    def transitions(self) -> list[Transition]:
+        rows = self._all("SELECT from_id, to_id, x, y, yaw, covariance, source FROM "
+                         "transitions ORDER BY from_id, to_id")
+        return [_transition(r) for r in rows]
+
+    def load(self) -> TopologicalMap:
+        """The whole map in memory; every place's digest checked."""
+        rows = self._all("SELECT id, label, created_unix_s, background_lrp, landmarks, "
+                         "panorama, local_space, digest FROM places ORDER BY id")
+        places = [self._decode_place(r) for r in rows]
+        return TopologicalMap(places, self.transitions())
+
+    def _decode_place(self, row: Sequence[Any]) -> Place:
+        pid, label, created, background, lm_blob, pano_blob, ls_blob, stored = row
+        where = f"{self.path}: place {pid}"
+        if codec.digest(lm_blob, pano_blob, ls_blob) != stored:
+            raise MapStoreError(f"{where} is damaged (its bytes do not match their digest)")
+        landmarks = codec.decode_landmarks(bytes(lm_blob), where)
+        panorama = codec.decode_image(bytes(pano_blob), where)
+        try:
+            return Place(landmarks, panorama, label=str(label), created_unix_s=float(created),
+                         background_lrp=None if background is None else float(background),
+                         local_space=codec.decode_vector(ls_blob), id=int(pid))
+        except ValueError as e:
+            raise MapStoreError(f"{where}: {e}") from e
+
+    # ------------------------------------------------------------ writing
+    def add_place(self, place: Place, links: Sequence[tuple[int, UncertainSE2, str]] = ()
+                  ) -> Place:
+        """Store ``place`` and its transitions in one transaction. ``links``: (existing
+        place id, T_existing_new, source); each is stored both ways. Returns the place with
+        the id it was given."""
+        self._writable()
+        with self._lock, _transaction(self._db):
+            new_id = self._insert_place(place, keep_id=False)
+            for other, T, source in links:
+                t = Transition(int(other), new_id, T, source)  # type: ignore[arg-type]
+                for one_way in t.both_ways():
+                    self._put_transition(one_way)
+        return dataclasses.replace(place, id=new_id)
+
+    def import_places(self, places: Sequence[Place], transitions: Sequence[Transition]
+                      ) -> None:
+        """Places with their ids and transitions as given (map import), in one transaction."""
+        self._writable()
+        with self._lock, _transaction(self._db):
+            for place in places:
+                self._insert_place(place, keep_id=True)
+            for t in transitions:
+                self._put_transition(t)
+
+    def add_transition(self, transition: Transition) -> None:
+        """Store a transition both ways (replacing an earlier one between the two)."""
+        self._writable()
+        with self._lock, _transaction(self._db):
+            for one_way in transition.both_ways():
+                self._put_transition(one_way)
+
+    def set_background(self, place_id: int, background_lrp: float) -> None:
+        self._writable()
+        with self._lock, _transaction(self._db):
+            self._db.execute("UPDATE places SET background_lrp = ? WHERE id = ?",
+                             (float(background_lrp), place_id))
+
+    def _insert_place(self, place: Place, keep_id: bool) -> int:
+        lm = codec.encode_landmarks(place.landmarks)
+        pano = codec.encode_image(place.reference_panorama)
+        ls = codec.encode_vector(place.local_space)
+        cur = self._db.execute(
+            "INSERT INTO places(id, label, created_unix_s, background_lrp, landmark_count, "
+            "landmarks, panorama, local_space, digest) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            (place.id if keep_id else None, place.label, place.created_unix_s,
+             place.background_lrp, place.landmark_count, lm, pano, ls,
+             codec.digest(lm, pano, ls)))
+        return int(cur.lastrowid or 0)
+
+    def _put_transition(self, t: Transition) -> None:
+        m = t.T_from_to.mean
+        cov = np.asarray(t.T_from_to.covariance, dtype="<f8").tobytes()
+        self._db.execute("INSERT OR REPLACE INTO transitions(from_id, to_id, x, y, yaw, "
+                         "covariance, source) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                         (t.from_id, t.to_id, m.x, m.y, m.yaw, cov, t.source))
+
+    def _writable(self) -> None:
+        if self.readonly:
+            raise MapStoreError(f"{self.path} is open read-only")
+
+    # ------------------------------------------------------------ plumbing
+    def _one(self, sql: str, args: tuple[Any, ...] = ()) -> Any:
+        with self._lock:
+            try:
+                return self._db.execute(sql, args).fetchone()
+            except sqlite3.DatabaseError as e:
+                raise MapStoreError(f"{self.path}: {e}") from e
+
+    def _all(self, sql: str, args: tuple[Any, ...] = ()) -> list[Any]:
+        with self._lock:
+            try:
+                return self._db.execute(sql, args).fetchall()
+            except sqlite3.DatabaseError as e:
+                raise MapStoreError(f"{self.path}: {e}") from e
+
+    def close(self) -> None:
+        with self._lock:
+            self._db.close()
+
+    def __enter__(self) -> MapStore:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _transition(r: Sequence[Any]) -> Transition:
+    cov = np.frombuffer(r[5], dtype="<f8")
+    if cov.size != 9:
+        raise MapStoreError(f"transition {r[0]} -> {r[1]}: covariance is not 3 x 3")
+    return Transition(int(r[0]), int(r[1]),
+                      UncertainSE2(SE2(float(r[2]), float(r[3]), float(r[4])),
+                                   cov.reshape(3, 3)), str(r[6]))  # type: ignore[arg-type]
+
+
+def _connect(p: Path, readonly: bool) -> sqlite3.Connection:
+    if readonly:
+        return sqlite3.connect(f"file:{p}?mode=ro", uri=True, check_same_thread=False,
+                               isolation_level=None)
+    return sqlite3.connect(p, check_same_thread=False, isolation_level=None)
+
+
+def _inspect(p: Path, geometry_checksum: str | None) -> int:
+    """Every check, on a read-only connection: the schema version this file has."""
+    with open(p, "rb") as f:
+        header = f.read(16)
+    if header != b"SQLite format 3\x00":
+        raise MapStoreError(f"{p} is not a placecell map (not an SQLite file); the file was "
+                            "left untouched")
+    try:
+        db = _connect(p, readonly=True)
+    except sqlite3.DatabaseError as e:
+        raise MapStoreError(f"{p} is not a placecell map ({e})") from e
+    try:
+        check = db.execute("PRAGMA quick_check").fetchall()
+        if [r[0] for r in check] != ["ok"]:
+            raise MapStoreError(f"{p} is damaged (SQLite integrity check: "
+                                f"{'; '.join(str(r[0]) for r in check[:3])}); the file was "
+                                "left untouched")
+        tables = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+        if "meta" not in tables:
+            raise MapStoreError(f"{p} is not a placecell map (an SQLite file without its "
+                                "meta table); the file was left untouched")
+        rows = dict(db.execute("SELECT key, value FROM meta").fetchall())
+        version_text = rows.get("schema_version")
+        try:
+            version = int(str(version_text))
+        except ValueError:
+            raise MapStoreError(f"{p} is not a placecell map (schema version "
+                                f"{version_text!r}); the file was left untouched") from None
+        if version > SCHEMA_VERSION:
+            raise MapStoreError(
+                f"{p} has map schema version {version}, this placecell reads versions up to "
+                f"{SCHEMA_VERSION}: upgrade placecell; the file was left untouched")
+        if version < 1:
+            raise MapStoreError(f"{p} has an invalid map schema version {version}")
+        stored = rows.get("geometry_checksum")
+        if geometry_checksum is not None and stored != geometry_checksum:
+            raise MapStoreError(
+                f"{p} was made with another panorama geometry (checksum {stored}, configured "
+                f"{geometry_checksum}): check [mirror] and [panorama], or set map.path to a "
+                "new file; the map was left untouched")
+        if version == 1 and int(db.execute("SELECT COUNT(*) FROM places").fetchone()[0]):
+            raise MapStoreError(f"{p}: a version 1 map with places cannot be migrated (no "
+                                "release stored any); the file was left untouched")
+        return version
+    except sqlite3.DatabaseError as e:
+        raise MapStoreError(f"{p} is not a readable placecell map ({e}); the file was left "
+                            "untouched") from e
+    finally:
+        db.close()
+
+
+def _create_v2(db: sqlite3.Connection) -> None:
+    for statement in _SCHEMA_V2.split(";"):
+        if statement.strip():
+            db.execute(statement)
+
+
+def _migrate(db: sqlite3.Connection, p: Path, version: int) -> None:
+    """Version 1 (meta, empty places and transitions tables) to 2, in one transaction."""
+    with _transaction(db):
+        if version == 1:
+            meta = db.execute("SELECT key, value FROM meta").fetchall()
+            db.execute("DROP TABLE IF EXISTS transitions")
+            db.execute("DROP TABLE IF EXISTS places")
+            db.execute("DROP TABLE meta")
+            _create_v2(db)
+            db.executemany("INSERT INTO meta(key, value) VALUES (?, ?)", meta)
+            db.execute("INSERT OR REPLACE INTO meta(key, value) VALUES ('application', ?)",
+                       (APPLICATION,))
+            db.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'",
+                       (str(SCHEMA_VERSION),))
+    log.info("migrated map %s from schema version %d to %d", p, version, SCHEMA_VERSION)
+
+
+@contextlib.contextmanager
+def _transaction(db: sqlite3.Connection) -> Iterator[None]:
+    """All or nothing: a failure half-way leaves the file as it was."""
+    db.execute("BEGIN IMMEDIATE")
+    try:
+        yield
+    except BaseException:
+        db.execute("ROLLBACK")
+        raise
+    db.execute("COMMIT")

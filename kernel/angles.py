@@ -1,0 +1,16 @@
+"""Angles: radians, wrapped to (-pi, pi] (SPEC conventions)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+TWO_PI = 2.0 * math.pi
+
+
+def wrap_angle(a: float | np.ndarray) -> float | np.ndarray:
+    """Wrap to (-pi, pi]."""
+    w = np.mod(np.asarray(a) + math.pi, TWO_PI) - math.pi
+    w = np.where(w == -math.pi, math.pi, w)
+    return float(w) if np.ndim(w) == 0 else w

@@ -1,0 +1,227 @@
+"""The map file (daemon/store): places with their transitions, durable, refusing bad files
+untouched, readable while written, exported and imported back."""
+
+from __future__ import annotations
+
+import hashlib
+import multiprocessing
+import os
+import sqlite3
+import threading
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from daemon.store.export import export_map, import_map
+from daemon.store.sqlite_store import MapStore
+from daemon.vision.drawing import LANDMARK_COLOUR
+from kernel.errors import MapStoreError
+from kernel.se2 import SE2, UncertainSE2
+from tests.map_fixtures import synthetic_place, write_places_until_killed
+
+GEOMETRY = "abc123"
+
+
+def _sha(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _two_places(path: Path) -> MapStore:
+    rng = np.random.default_rng(1)
+    store = MapStore.open(path, GEOMETRY)
+    a = store.add_place(synthetic_place(rng, "dock"))
+    T = UncertainSE2(SE2(1.5, -0.2, 0.3), np.diag([0.01, 0.02, 0.003]))
+    store.add_place(synthetic_place(rng, "door"), [(a.id, T, "odometry")])
+    return store
+
+
+def test_place_and_transitions_round_trip_both_ways(tmp_path: Path) -> None:
+    rng = np.random.default_rng(1)
+    original = synthetic_place(rng, "dock")
+    with _two_places(tmp_path / "map.db") as store:
+        graph = store.load()
+        assert [p.label for p in graph.places] == ["dock", "door"]
+        first = graph.place(1)
+        assert np.array_equal(first.landmarks.templates(), original.landmarks.templates())
+        assert np.array_equal(first.reference_panorama, original.reference_panorama)
+        assert first.landmarks.landmarks[3].depth == original.landmarks.landmarks[3].depth
+        forward, back = graph.transition(1, 2), graph.transition(2, 1)
+        assert forward is not None and back is not None
+        assert forward.T_from_to.mean.as_tuple() == pytest.approx((1.5, -0.2, 0.3))
+        round_trip = forward.T_from_to.mean.compose(back.T_from_to.mean)
+        assert round_trip.as_tuple() == pytest.approx((0, 0, 0), abs=1e-12)
+        assert [t.to_id for t in store.neighbours(2)] == [1]
+        assert store.transition_count() == 2
+
+
+def test_background_lrp_is_unknown_until_measured(tmp_path: Path) -> None:
+    with _two_places(tmp_path / "map.db") as store:
+        assert store.place(1).background_lrp is None
+        store.set_background(1, 0.71)
+        assert store.place(1).background_lrp == pytest.approx(0.71)
+
+
+def _truncated(p: Path) -> None:
+    data = p.read_bytes()
+    p.write_bytes(data[: len(data) // 2])
+
+
+def _corrupt_place_bytes(p: Path) -> None:
+    data = bytearray(p.read_bytes())
+    # Inside the second place's panorama PNG: SQLite's structure stays intact.
+    i = data.rfind(b"IDAT") + 400
+    data[i: i + 64] = bytes(64)
+    p.write_bytes(bytes(data))
+
+
+def _corrupt_btree(p: Path) -> None:
+    data = bytearray(p.read_bytes())
+    page = 4096
+    data[page: page + 200] = os.urandom(200)  # page 2: the first table's b-tree page
+    p.write_bytes(bytes(data))
+
+
+def _newer_schema(p: Path) -> None:
+    db = sqlite3.connect(p)
+    db.execute("UPDATE meta SET value = '3' WHERE key = 'schema_version'")
+    db.commit()
+    db.close()
+
+
+def _not_a_map(p: Path) -> None:
+    p.unlink()
+    db = sqlite3.connect(p)
+    db.execute("CREATE TABLE recipes (name TEXT)")
+    db.commit()
+    db.close()
+
+
+def _random_bytes(p: Path) -> None:
+    p.write_bytes(np.random.default_rng(3).integers(0, 256, 20000, np.uint8).tobytes())
+
+
+@pytest.mark.parametrize(("damage", "geometry", "message"), [
+    (_truncated, GEOMETRY, "damaged|not a readable"),
+    (_corrupt_place_bytes, GEOMETRY, "place 2 is damaged"),
+    (_corrupt_btree, GEOMETRY, "damaged|not a readable"),
+    (_newer_schema, GEOMETRY, "schema version 3.*upgrade placecell"),
+    (lambda p: None, "fff000", "another panorama geometry"),
+    (_not_a_map, GEOMETRY, "not a placecell map .*without its meta table"),
+    (_random_bytes, GEOMETRY, "not a placecell map .*not an SQLite file"),
+])
+def test_bad_files_are_refused_byte_for_byte_unchanged(tmp_path: Path, damage, geometry: str,
+                                                       message: str) -> None:
+    path = tmp_path / "map.db"
+    store = _two_places(path)
+    store.close()  # checkpoints the WAL into the file
+    damage(path)
+    before = _sha(path)
+    with pytest.raises(MapStoreError, match=message):
+        MapStore.open(path, geometry).load()
+    with pytest.raises(MapStoreError, match=message):
+        MapStore.open(path, geometry, readonly=True).load()
+    assert _sha(path) == before
+
+
+def test_version_1_map_is_migrated(tmp_path: Path) -> None:
+    path = tmp_path / "v1.db"
+    db = sqlite3.connect(path)
+    db.executescript("""
+        CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+        CREATE TABLE places (id INTEGER PRIMARY KEY, label TEXT NOT NULL DEFAULT '',
+            created_unix_s REAL NOT NULL, background_lrp REAL, data BLOB NOT NULL);
+        CREATE TABLE transitions (from_id INTEGER NOT NULL, to_id INTEGER NOT NULL,
+            x REAL NOT NULL, y REAL NOT NULL, yaw REAL NOT NULL, covariance BLOB NOT NULL,
+            PRIMARY KEY (from_id, to_id));
+        INSERT INTO meta VALUES ('schema_version', '1'), ('geometry_checksum', 'abc123'),
+            ('created_unix_s', '1700000000.0');
+    """)
+    db.commit()
+    db.close()
+    with MapStore.open(path, GEOMETRY) as store:
+        assert store.meta("schema_version") == "2"
+        assert store.meta("created_unix_s") == "1700000000.0"
+        stored = store.add_place(synthetic_place(np.random.default_rng(0)))
+        assert store.place(stored.id).landmark_count == 16
+
+
+def test_readers_are_not_blocked_by_the_writer(tmp_path: Path) -> None:
+    path = tmp_path / "map.db"
+    _two_places(path).close()
+    writer = sqlite3.connect(path, isolation_level=None)
+    writer.execute("BEGIN IMMEDIATE")
+    writer.execute("UPDATE places SET label = 'renamed' WHERE id = 1")
+    seen: list[str] = []
+
+    def read() -> None:
+        with MapStore.open(path, None, readonly=True) as reader:
+            seen.extend(s.label for s in reader.summaries())
+
+    t = threading.Thread(target=read)
+    t.start()
+    t.join(5.0)
+    writer.execute("COMMIT")
+    writer.close()
+    assert not t.is_alive() and seen == ["dock", "door"]  # the committed state, at once
+
+
+def test_export_then_import_gives_the_same_map(tmp_path: Path) -> None:
+    with _two_places(tmp_path / "map.db") as store:
+        store.set_background(2, 0.68)
+        assert export_map(store, tmp_path / "out") == 2
+        original = store.load()
+    assert import_map(tmp_path / "out", tmp_path / "copy.db") == 2
+    with MapStore.open(tmp_path / "copy.db", GEOMETRY) as copy:
+        again = copy.load()
+    for a, b in zip(original.places, again.places, strict=True):
+        assert (a.id, a.label, a.background_lrp) == (b.id, b.label, b.background_lrp)
+        assert a.landmarks.templates().tobytes() == b.landmarks.templates().tobytes()
+        assert np.array_equal(a.reference_panorama, b.reference_panorama)
+        for la, lb in zip(a.landmarks.landmarks, b.landmarks.landmarks, strict=True):
+            assert (la.row, la.col, la.bearing, la.depth) == (lb.row, lb.col, lb.bearing,
+                                                              lb.depth)
+            assert np.array_equal(la.covariance, lb.covariance)
+    assert {(t.from_id, t.to_id, t.T_from_to.mean) for t in original.transitions} == {
+        (t.from_id, t.to_id, t.T_from_to.mean) for t in again.transitions}
+    # The picture shows every landmark: its outline in the landmark colour.
+    drawn = cv2.imread(str(tmp_path / "out" / "place-1.png"))
+    for lm in original.place(1).landmarks.landmarks:
+        top = drawn[lm.row * 2, lm.col * 2: lm.col * 2 + 32]
+        assert np.mean(np.all(top == LANDMARK_COLOUR, axis=1)) > 0.9
+    with pytest.raises(MapStoreError, match="exists"):
+        import_map(tmp_path / "out", tmp_path / "copy.db")
+
+
+def test_sigkill_while_writing_never_leaves_half_a_place(tmp_path: Path) -> None:
+    path = tmp_path / "map.db"
+    MapStore.open(path, GEOMETRY).close()
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(["daemon.store.sqlite_store", "tests.map_fixtures"])
+    rng = np.random.default_rng(11)
+    kills, checked = 200, 0
+    for k in range(kills):
+        writing = ctx.Event()
+        proc = ctx.Process(target=write_places_until_killed, args=(str(path), GEOMETRY, k,
+                                                                   writing), daemon=True)
+        proc.start()
+        assert writing.wait(30.0), f"writer {k} did not start (exit code {proc.exitcode})"
+        proc.join(float(rng.uniform(0.0, 0.05)))  # a random moment of its writing
+        proc.kill()
+        proc.join(5.0)
+        db = sqlite3.connect(path)
+        assert db.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
+        db.close()
+        with MapStore.open(path, GEOMETRY, readonly=True) as store:
+            ids = [summary.id for summary in store.summaries()]
+            assert ids == list(range(1, len(ids) + 1))
+            for pid in ids[max(checked - 1, 0):]:  # places written since the last kill
+                store.place(pid)  # decodes, digest checked
+                if pid > 1:  # complete with its transitions, both ways
+                    assert pid - 1 in [t.to_id for t in store.neighbours(pid)]
+                    assert pid in [t.to_id for t in store.neighbours(pid - 1)]
+            checked = len(ids)
+    assert checked > 20  # the writer did get to write between kills
+    with MapStore.open(path, GEOMETRY, readonly=True) as store:
+        assert len(store.load()) == checked
