@@ -7,6 +7,7 @@ section of the configuration and ``context`` the :class:`HalContext` shared by a
 from __future__ import annotations
 
 import importlib
+import threading
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -40,11 +41,15 @@ class HalContext:
     def __init__(self, config: Any) -> None:
         self.config = config
         self._shared: dict[str, Any] = {}
+        # The camera and base components open their devices on their own threads at once:
+        # without the lock both could build "the one" simulated robot.
+        self._lock = threading.Lock()
 
     def shared(self, key: str, factory: Callable[[], T]) -> T:
-        if key not in self._shared:
-            self._shared[key] = factory()
-        return self._shared[key]  # type: ignore[no-any-return]
+        with self._lock:
+            if key not in self._shared:
+                self._shared[key] = factory()
+            return self._shared[key]  # type: ignore[no-any-return]
 
 
 def load_backend(kind: str, name: str, table: dict[str, str] | None = None) -> type:

@@ -49,6 +49,10 @@ class LearningError(PlacecellError):
     """Place learning (Turn Back and Look) was refused or failed."""
 
 
+class LearningRefusedError(LearningError):
+    """Place learning cannot start here and now (e.g. the base cannot move)."""
+
+
 class LearningAbortedError(LearningError):
     """Place learning was aborted on request; nothing was stored."""
 

@@ -15,6 +15,10 @@ from daemon.service import zenoh_link
 
 DEFAULT_CONFIG = "config/placecell.toml"
 
+# Exit codes, distinct so scripts can tell what happened.
+EXIT_OK, EXIT_USAGE, EXIT_UNREACHABLE, EXIT_REFUSED, EXIT_ABORTED, EXIT_FAILED = 0, 2, 3, 4, 5, 6
+_EXIT_OF_CODE = {"aborted": EXIT_ABORTED, "failed": EXIT_FAILED}
+
 
 def _endpoints_from_config(path: str | None) -> tuple[str | None, list[str]]:
     """The robot name and the daemon's listen endpoints, read from its config file."""
@@ -37,15 +41,187 @@ def open_client(args: argparse.Namespace) -> tuple[zenoh.Session, str]:
     return session, args.robot or robot or "*"
 
 
-def query_json(session: zenoh.Session, key: str, timeout_s: float) -> list[dict[str, Any]]:
+def query_json(session: zenoh.Session, key: str, timeout_s: float, payload: bytes = b""
+               ) -> list[dict[str, Any]]:
     out = []
-    for reply in session.get(key, timeout=timeout_s):
+    for reply in session.get(key, payload=payload or None, timeout=timeout_s):
         if reply.ok is not None:
             try:
                 out.append(zenoh_link.decode(reply.ok.payload.to_bytes()))
             except ValueError:
                 continue
     return out
+
+
+def _unreachable(args: argparse.Namespace, key: str) -> int:
+    where = args.connect or f"from {args.config or DEFAULT_CONFIG}"
+    print(f"placecellctl: no placecell daemon answered on {key} within {args.timeout:.1f} s "
+          f"(is placecelld running? endpoints: {where})", file=sys.stderr)
+    return EXIT_UNREACHABLE
+
+
+def _print(obj: Any) -> None:
+    print(json.dumps(obj, separators=(",", ":")), flush=True)
+
+
+def _error_exit(reply: dict[str, Any], as_json: bool) -> int:
+    if as_json:
+        _print(reply)
+    else:
+        print(f"placecellctl: {reply.get('code')}: {reply.get('message')}", file=sys.stderr)
+    return _EXIT_OF_CODE.get(str(reply.get("code")), EXIT_REFUSED)
+
+
+def cmd_learn(args: argparse.Namespace) -> int:
+    """Learn a place here: progress while the robot drives the cross, then the place."""
+    request: dict[str, Any] = {}
+    if args.label is not None:
+        request["label"] = args.label
+    if args.extent is not None:
+        request["extent_m"] = args.extent
+    session, robot = open_client(args)
+    key = zenoh_link.key(robot, "cmd/learn_place")
+    seen = False
+    try:
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+        bar = None if args.json else Progress(
+            TextColumn("learning a place: {task.description:18s}"), BarColumn(),
+            TextColumn("{task.percentage:>3.0f} %"), TimeElapsedColumn(),
+            console=_console())
+        task = None
+        if bar is not None:
+            bar.start()
+            task = bar.add_task("starting", total=1.0)
+        try:
+            # No consolidation: by default zenoh keeps only the last reply per key, and
+            # every progress reply carries the same key.
+            for reply in session.get(key, payload=json.dumps(request).encode(),
+                                     consolidation=zenoh.ConsolidationMode.NONE,
+                                     timeout=args.learn_timeout):
+                if reply.ok is None:
+                    continue
+                try:
+                    msg = zenoh_link.decode(reply.ok.payload.to_bytes())
+                except ValueError:
+                    continue
+                seen = True
+                kind = msg.get("kind")
+                if kind == "progress":
+                    if bar is not None and task is not None:
+                        bar.update(task, completed=float(msg["fraction"]),
+                                   description=str(msg["phase"]))
+                    else:
+                        _print(msg)
+                    continue
+                if bar is not None:
+                    bar.stop()
+                    bar = None
+                if kind == "error":
+                    return _error_exit(msg, args.json)
+                if args.json:
+                    _print(msg)
+                else:
+                    place = msg["place"]
+                    links = ", ".join(f"{t['from']} -> {t['to']}" for t in msg["transitions"])
+                    print(f"learned place {place['id']} ({place['label'] or 'no label'}): "
+                          f"{place['landmarks']} landmarks"
+                          + (f"; transitions {links}" if links else ""))
+                return EXIT_OK
+        finally:
+            if bar is not None:
+                bar.stop()
+    finally:
+        session.close()
+    if seen:
+        print("placecellctl: the daemon stopped answering before learning ended",
+              file=sys.stderr)
+        return EXIT_FAILED
+    return _unreachable(args, key)
+
+
+def _console() -> Any:
+    from rich.console import Console
+
+    return Console(stderr=False)
+
+
+def _simple_query(args: argparse.Namespace, leaf: str, payload: bytes = b""
+                  ) -> tuple[int, dict[str, Any] | None]:
+    session, robot = open_client(args)
+    key = zenoh_link.key(robot, leaf)
+    try:
+        replies = query_json(session, key, args.timeout, payload)
+    finally:
+        session.close()
+    if not replies:
+        return _unreachable(args, key), None
+    return EXIT_OK, replies[0]
+
+
+def cmd_abort(args: argparse.Namespace) -> int:
+    code, reply = _simple_query(args, "cmd/abort")
+    if reply is None:
+        return code
+    if reply.get("kind") == "error":
+        return _error_exit(reply, args.json)
+    if args.json:
+        _print(reply)
+    else:
+        print(f"aborted: {reply.get('aborted')}")
+    return EXIT_OK
+
+
+def cmd_places(args: argparse.Namespace) -> int:
+    code, reply = _simple_query(args, "map/places")
+    if reply is None:
+        return code
+    if args.json:
+        _print(reply)
+        return EXIT_OK
+    places = reply["places"]
+    if not places:
+        print("no places learned yet")
+    for p in places:
+        bg = "unknown" if p["background_lrp"] is None else f"{p['background_lrp']:.3f}"
+        print(f"{p['id']:5d}  {p['label'] or '-':20s} {p['landmarks']:3d} landmarks, "
+              f"background LRP {bg}")
+    return EXIT_OK
+
+
+def cmd_map(args: argparse.Namespace) -> int:
+    """Offline work on a map file: no daemon needed (it may be running and writing)."""
+    from daemon.store.export import export_map, import_map
+    from daemon.store.sqlite_store import MapStore
+    from kernel.errors import MapStoreError
+
+    try:
+        if args.map_command == "info":
+            with MapStore.open(args.file, None, readonly=True) as store:
+                graph = store.load()  # every place decoded, its digest checked
+                info = {"file": str(args.file), "schema_version": store.meta("schema_version"),
+                        "geometry_checksum": store.meta("geometry_checksum"),
+                        "places": len(graph), "transitions": len(graph.transitions),
+                        "bytes": Path(args.file).stat().st_size,
+                        "labels": {p.id: p.label for p in graph.places}}
+            if args.json:
+                _print(info)
+            else:
+                print(f"{info['file']}: map schema {info['schema_version']}, geometry "
+                      f"{info['geometry_checksum']}, {info['places']} places, "
+                      f"{info['transitions']} transitions (both ways), {info['bytes']} bytes")
+            return EXIT_OK
+        if args.map_command == "export":
+            with MapStore.open(args.file, None, readonly=True) as store:
+                n = export_map(store, args.folder)
+            print(f"exported {n} places to {args.folder}")
+            return EXIT_OK
+        n = import_map(args.folder, args.file)
+        print(f"imported {n} places into {args.file}")
+        return EXIT_OK
+    except MapStoreError as e:
+        print(f"placecellctl: {e}", file=sys.stderr)
+        return EXIT_REFUSED
 
 
 def cmd_status(args: argparse.Namespace) -> int:
@@ -55,11 +231,7 @@ def cmd_status(args: argparse.Namespace) -> int:
     finally:
         session.close()
     if not replies:
-        where = args.connect or f"from {args.config or DEFAULT_CONFIG}"
-        print(f"placecellctl: no placecell daemon answered on placecell/{robot}/status within "
-              f"{args.timeout:.1f} s (is placecelld running? endpoints: {where})",
-              file=sys.stderr)
-        return 3
+        return _unreachable(args, zenoh_link.key(robot, "status"))
     if args.json:
         print(json.dumps(replies[0] if len(replies) == 1 else replies, indent=2))
         return 0
@@ -98,6 +270,32 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("status", help="show the daemon's health, rates and belief")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=cmd_status)
+    p = sub.add_parser("learn", help="learn a place where the robot stands (it drives a "
+                       "Turn-Back-and-Look cross)")
+    p.add_argument("--label", help="the place's name")
+    p.add_argument("--extent", type=float, help="cross arm in metres (default: [tbl])")
+    p.add_argument("--learn-timeout", type=float, default=180.0,
+                   help="seconds to wait for the whole job")
+    p.add_argument("--json", action="store_true", help="one JSON object per line")
+    p.set_defaults(func=cmd_learn)
+    p = sub.add_parser("abort", help="stop the running job (the robot stops; nothing stored)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_abort)
+    p = sub.add_parser("places", help="the places of the daemon's map")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_places)
+    p = sub.add_parser("map", help="work on a map file offline")
+    msub = p.add_subparsers(dest="map_command", required=True)
+    m = msub.add_parser("info", help="what a map file holds (checks every place)")
+    m.add_argument("file")
+    m.add_argument("--json", action="store_true")
+    m = msub.add_parser("export", help="places and transitions to a folder (JSON, PNGs)")
+    m.add_argument("file")
+    m.add_argument("folder")
+    m = msub.add_parser("import", help="a new map file from an exported folder")
+    m.add_argument("folder")
+    m.add_argument("file")
+    p.set_defaults(func=cmd_map)
     args = parser.parse_args(argv)
     try:
         return int(args.func(args))

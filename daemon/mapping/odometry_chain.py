@@ -77,3 +77,11 @@ class OdometryChain:
     def relative(self) -> UncertainSE2:
         """The last sample's pose in the start sample's frame, with its covariance."""
         return UncertainSE2(self._pose, self._P[:3, :3].copy())
+
+    def relative_at(self, sample: Odometry) -> UncertainSE2:
+        """The pose at ``sample`` (a moment before or after the last one fed) in the start
+        sample's frame: the mean moved by the odometry between the two; the covariance of
+        the last sample (that moment adds nothing measurable)."""
+        last = SE2(self._last.x, self._last.y, self._last.yaw)
+        residual = last.between(SE2(sample.x, sample.y, sample.yaw))
+        return UncertainSE2(self._pose.compose(residual), self._P[:3, :3].copy())

@@ -81,6 +81,8 @@ class TurnBackAndLook:
         thesis identified its artificial markers by hand to measure depth, §4.6.4)."""
         self.settings = settings
         self.margin = margin
+        self.reference_panorama = reference_1  # the place's reference view (design §6)
+        self.start = start  # odometry at the reference pose
         if choose is None:
             self.candidates = select_static(reference_1, reference_2, margin,
                                             count=settings.candidates)

@@ -17,7 +17,7 @@ import zenoh
 import daemon
 from daemon.config import PlacecellConfig
 from daemon.localisation.localiser import Belief, Localiser
-from daemon.service import zenoh_link
+from daemon.service import api, zenoh_link
 from daemon.service.components import (
     LatestFrame,
     OdometryInbox,
@@ -25,9 +25,18 @@ from daemon.service.components import (
     base_component,
     camera_component,
 )
+from daemon.service.learn_job import (
+    BaseCommands,
+    FrameFeed,
+    LearnJob,
+    LearnOutcome,
+    job_settings,
+)
+from daemon.service.mapper import Mapper
 from daemon.service.notify import Notifier
 from daemon.service.supervisor import Supervisor, describe
 from daemon.store.sqlite_store import MapStore
+from daemon.vision.unwarp import Unwarper
 from hal.registry import HalContext, create_base, create_camera
 from kernel.panorama import geometry_checksum
 
@@ -53,6 +62,15 @@ class Daemon:
         # The map first: a map made with another geometry stops the daemon before any device.
         self.map = MapStore.open(config.map.path, geometry_checksum(config.mirror,
                                                                     config.panorama))
+        try:
+            self.mapper = Mapper(self.map, config.odometry)
+        except BaseException:
+            self.map.close()
+            raise
+        self._unwarper = Unwarper(config.mirror, config.panorama)
+        self._job_lock = threading.Lock()
+        self._job: LearnJob | None = None
+        self._queryables: list[Any] = []
         self.supervisor = Supervisor(
             config.service.restart_backoff_initial_s, config.service.restart_backoff_max_s,
             on_event=self.publish_event,
@@ -74,10 +92,12 @@ class Daemon:
             lambda: sup.health["camera"], frame_taps)
         self.base = base_component(
             lambda: create_base(cfg.base, self.hal), cfg.base.read_timeout_s, inbox.put,
-            lambda: sup.health["base"], odo_taps)
+            lambda: sup.health["base"], odo_taps, on_open=self.mapper.odometry_restarted)
         self.processing = ProcessingComponent(
-            lambda: Localiser(cfg.mirror, cfg.panorama, places=self.map.place_count()),
-            mailbox, inbox, self._on_belief, lambda: sup.health["processing"])
+            lambda: Localiser(cfg.mirror, cfg.panorama, places=self.mapper.place_count()),
+            mailbox, inbox, self._on_belief, lambda: sup.health["processing"],
+            odometry_taps=[self.mapper.on_odometry, self._job_odometry],
+            frame_taps=[self._job_frame])
         for c in (self.camera, self.base, self.processing):
             sup.add(c)
 
@@ -94,16 +114,118 @@ class Daemon:
         for leaf in ("status", "events", "belief"):
             self._publishers[leaf] = s.declare_publisher(zenoh_link.key(self.robot, leaf))
         # Late joiners (placecellctl status) get the latest status at once by query.
-        self._status_queryable = s.declare_queryable(
-            zenoh_link.key(self.robot, "status"), self._answer_status)
+        for leaf, handler in (("status", self._answer_status),
+                              ("cmd/learn_place", self._answer_learn),
+                              ("cmd/abort", self._answer_abort),
+                              ("map/places", self._answer_places),
+                              ("map/transitions", self._answer_transitions)):
+            self._queryables.append(s.declare_queryable(
+                zenoh_link.key(self.robot, leaf), _guarded(leaf, handler)))
         log.info("zenoh session %s: listening on %s, connecting to %s, multicast scouting %s",
                  s.zid(), z.listen, z.connect, "on" if z.multicast_scouting else "off")
 
     def _answer_status(self, query: zenoh.Query) -> None:
+        query.reply(query.key_expr, self.status_payload())
+
+    # ------------------------------------------------------------------ learning
+    def _answer_learn(self, query: zenoh.Query) -> None:
+        """cmd/learn_place: progress replies, then one result or error (design §11)."""
+        def reply(kind: str, fields: dict[str, Any]) -> None:
+            try:
+                query.reply(query.key_expr, zenoh_link.encode(api.REPLY_SCHEMA,
+                                                              {"kind": kind, **fields}))
+            except Exception as e:  # noqa: BLE001 - the client may have gone
+                log.debug("learn reply failed: %s", e)
+            if kind in ("result", "error"):
+                query.drop()
+
         try:
-            query.reply(query.key_expr, self.status_payload())
-        except Exception as e:  # noqa: BLE001 - a client must never crash the daemon
-            log.warning("status query failed: %s", e)
+            request = api.parse(api.LearnRequest, _payload(query), "learn_place")
+            job = self._start_learning(request, reply)
+        except api.RequestError as e:
+            reply("error", {"code": str(e.code), "message": str(e)})
+            return
+        log.info("learning a place (label %r) at the operator's request", job.label)
+
+    def _start_learning(self, request: api.LearnRequest, reply: Any) -> LearnJob:
+        if self.config.mapping.mode != "mapping":
+            raise api.RequestError(api.ErrorCode.REFUSED, "the daemon is in localisation "
+                                   "mode: the map is read-only, no places are learned")
+        device = self.base.device
+        if device is None or self.supervisor.health["base"].state != "running":
+            raise api.RequestError(api.ErrorCode.REFUSED, "the base is not running: "
+                                   f"{self.supervisor.health['base'].last_error or 'starting'}")
+        if not device.info.can_move:
+            raise api.RequestError(api.ErrorCode.REFUSED, f"the base ({device.info.backend}) "
+                                   "cannot move: Turn Back and Look needs to drive the cross")
+        camera = self.camera.device
+        rate = float(camera.info.rate_hz) if camera is not None else 10.0
+        with self._job_lock:
+            if self._job is not None:
+                raise api.RequestError(api.ErrorCode.BUSY, "a place is being learned already "
+                                       f"({self._job.progress.phase}, "
+                                       f"{self._job.progress.fraction:.0%}): wait for it or "
+                                       "send cmd/abort")
+            job = LearnJob(label=request.label,
+                           settings=job_settings(self.config.tbl, request.extent_m),
+                           unwarper=self._unwarper, feed=FrameFeed(rate),
+                           mover=BaseCommands(lambda: self.base.device), mapper=self.mapper,
+                           reply=reply, on_done=self._learning_done)
+            self._job = job
+            job.start()
+        return job
+
+    def _learning_done(self, job: LearnJob, outcome: LearnOutcome) -> None:
+        with self._job_lock:
+            if self._job is job:
+                self._job = None
+        if outcome.place is not None:
+            p = outcome.place
+            self.publish_event("place_learned", place=p.id, label=p.label,
+                               landmarks=p.landmark_count)
+            for t in self.mapper.graph.neighbours(p.id):
+                self.publish_event("transition_added", **{"from": t.from_id, "to": t.to_id})
+        else:
+            self.publish_event("learning_ended", code=str(outcome.error),
+                               message=outcome.message)
+
+    def _job_odometry(self, samples: list[Any]) -> None:
+        job = self._job
+        if job is not None:
+            job.feed.put_odometry(samples)
+
+    def _job_frame(self, frame: Any) -> None:
+        job = self._job
+        if job is not None:
+            job.feed.put_frame(frame)
+
+    def _answer_abort(self, query: zenoh.Query) -> None:
+        received_ns = time.monotonic_ns()
+        api.parse(api.AbortRequest, _payload(query), "abort")
+        job = self._job
+        if job is None:
+            query.reply(query.key_expr, api.error(api.ErrorCode.NOTHING_TO_ABORT,
+                                                  "no job is running"))
+            return
+        job.abort()
+        query.reply(query.key_expr, api.result(aborted=job.kind, received_ns=received_ns,
+                                               stop_sent_ns=time.monotonic_ns()))
+
+    # ------------------------------------------------------------------ map
+    def _answer_places(self, query: zenoh.Query) -> None:
+        places = [{"id": p.id, "label": p.label, "created_unix_s": p.created_unix_s,
+                   "landmarks": p.landmark_count, "background_lrp": p.background_lrp}
+                  for p in self.mapper.summaries()]
+        query.reply(query.key_expr, zenoh_link.encode("placecell.places", {"places": places}))
+
+    def _answer_transitions(self, query: zenoh.Query) -> None:
+        out = []
+        for t in self.mapper.transitions():
+            m = t.T_from_to.mean
+            out.append({"from": t.from_id, "to": t.to_id, "x": m.x, "y": m.y, "yaw": m.yaw,
+                        "covariance": t.T_from_to.covariance.tolist(), "source": t.source})
+        query.reply(query.key_expr,
+                    zenoh_link.encode("placecell.transitions", {"transitions": out}))
 
     def publish(self, leaf: str, payload: bytes) -> None:
         pub = self._publishers.get(leaf)
@@ -143,8 +265,12 @@ class Daemon:
                 "processed_hz": round(health["processing"].rate.rate_hz(now), 2),
             },
             "belief": self._belief_summary(belief, now),
-            "map": {"path": self.config.map.path, "places": self.map.place_count(),
-                    "transitions": self.map.transition_count()},
+            "map": {"path": self.config.map.path, "places": self.mapper.place_count(),
+                    "transitions": self.mapper.transition_count(),
+                    "mode": self.config.mapping.mode},
+            "job": None if self._job is None else {
+                "kind": self._job.kind, "phase": self._job.progress.phase,
+                "fraction": round(self._job.progress.fraction, 3)},
             "versions": {
                 "placecell": daemon.__version__,
                 "python": platform.python_version(),
@@ -219,6 +345,10 @@ class Daemon:
     def _shutdown(self) -> int:
         log.info("stopping")
         self.notifier.stopping()
+        job = self._job
+        if job is not None:  # stop the robot; the job ends storing nothing
+            job.abort()
+            job.join(1.0)
         self.supervisor.stop(self.config.service.stop_timeout_s)
         self.publish_event("stopped")
         if self.recorder is not None:
@@ -233,6 +363,32 @@ class Daemon:
         self.notifier.close()
         log.info("stopped")
         return 0
+
+
+def _payload(query: zenoh.Query) -> bytes:
+    return b"" if query.payload is None else query.payload.to_bytes()
+
+
+def _guarded(leaf: str, handler: Any) -> Any:
+    """A queryable callback that answers every failure with an error reply: nothing a
+    client sends can raise out of it (design §11)."""
+    def answer(query: zenoh.Query) -> None:
+        try:
+            handler(query)
+        except api.RequestError as e:
+            _try_reply(query, api.error(e.code, str(e)))
+        except Exception as e:  # noqa: BLE001 - a client must never crash the daemon
+            log.warning("%s query failed: %s", leaf, e)
+            _try_reply(query, api.error(api.ErrorCode.FAILED, f"{type(e).__name__}: {e}"))
+
+    return answer
+
+
+def _try_reply(query: zenoh.Query, payload: bytes) -> None:
+    try:
+        query.reply(query.key_expr, payload)
+    except Exception as e:  # noqa: BLE001 - the client may have gone
+        log.debug("reply failed: %s", e)
 
 
 def _belief_body(belief: Belief) -> dict[str, Any]:

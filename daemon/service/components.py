@@ -10,8 +10,9 @@ from typing import Any
 
 from daemon.localisation.localiser import Belief, Localiser
 from daemon.service.health import ComponentHealth
-from hal.base.base import Base, Odometry
-from hal.camera.base import Camera, Frame
+from hal.base.base import Base
+from hal.camera.base import Camera
+from kernel.types import Frame, Odometry
 
 log = logging.getLogger(__name__)
 
@@ -45,19 +46,23 @@ class DeviceComponent:
     ``step`` with a timeout, each delivery handed to ``deliver``, closed by ``teardown``."""
 
     def __init__(self, name: str, make_device: Callable[[], Any], timeout_s: float,
-                 deliver: Callable[[Any, Any], int], health: Callable[[], ComponentHealth]
-                 ) -> None:
+                 deliver: Callable[[Any, Any], int], health: Callable[[], ComponentHealth],
+                 on_open: Callable[[], None] | None = None) -> None:
         self.name = name
         self._make = make_device
         self._timeout_s = timeout_s
         self._deliver = deliver  # (what was read, device) -> how many items (for the rate)
         self._health = health
-        self.device: Any = None
+        self._on_open = on_open
+        self.device: Any = None  # open between setup and teardown; others may command it
 
     def setup(self) -> None:
-        self.device = self._make()
-        self.device.open()
-        self._health().detail["device"] = _info(self.device)
+        device = self._make()
+        device.open()
+        self.device = device
+        self._health().detail["device"] = _info(device)
+        if self._on_open is not None:
+            self._on_open()
 
     def step(self) -> None:
         assert self.device is not None  # set by setup(), which the supervisor runs first
@@ -85,7 +90,10 @@ def camera_component(make_camera: Callable[[], Camera], timeout_s: float,
 
 def base_component(make_base: Callable[[], Base], timeout_s: float,
                    sink: Callable[[list[Odometry]], None], health: Callable[[], ComponentHealth],
-                   taps: Sequence[Callable[[list[Odometry], Base], None]]) -> DeviceComponent:
+                   taps: Sequence[Callable[[list[Odometry], Base], None]],
+                   on_open: Callable[[], None] | None = None) -> DeviceComponent:
+    """The base device; ``on_open`` is told each time it is (re)opened: its odometry may
+    then start from anywhere."""
     def deliver(samples: list[Odometry], base: Base) -> int:
         for tap in taps:
             tap(samples, base)
@@ -93,22 +101,27 @@ def base_component(make_base: Callable[[], Base], timeout_s: float,
         health().detail["flags"] = base.status().to_flags()
         return len(samples)
 
-    return DeviceComponent("base", make_base, timeout_s, deliver, health)
+    return DeviceComponent("base", make_base, timeout_s, deliver, health, on_open)
 
 
 class ProcessingComponent:
-    """Feeds frames and odometry to the localiser and hands each belief on."""
+    """Feeds frames and odometry to the localiser and hands each belief on; every frame
+    and every odometry sample also goes to the taps (the mapper, a running job)."""
 
     name = "processing"
 
     def __init__(self, make_localiser: Callable[[], Localiser], mailbox: LatestFrame,
                  odometry_inbox: OdometryInbox, on_belief: Callable[[Belief], None],
-                 health: Callable[[], ComponentHealth]) -> None:
+                 health: Callable[[], ComponentHealth],
+                 odometry_taps: Sequence[Callable[[list[Odometry]], None]] = (),
+                 frame_taps: Sequence[Callable[[Frame], None]] = ()) -> None:
         self._make = make_localiser
         self._mailbox = mailbox
         self._odometry = odometry_inbox
         self._on_belief = on_belief
         self._health = health
+        self._odometry_taps = odometry_taps
+        self._frame_taps = frame_taps
         self.localiser: Localiser | None = None
 
     def setup(self) -> None:
@@ -116,10 +129,15 @@ class ProcessingComponent:
 
     def step(self) -> None:
         assert self.localiser is not None  # set by setup(), which the supervisor runs first
-        self.localiser.add_odometry(self._odometry.drain())
+        samples = self._odometry.drain()
+        self.localiser.add_odometry(samples)
+        for odometry_tap in self._odometry_taps:
+            odometry_tap(samples)
         frame = self._mailbox.take(timeout=0.2)
         if frame is None:
             return
+        for frame_tap in self._frame_taps:
+            frame_tap(frame)
         belief = self.localiser.process_frame(frame)
         self._health().rate.tick()
         self._health().detail["timings_ms"] = belief.timings_ms

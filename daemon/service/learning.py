@@ -1,20 +1,33 @@
-"""Learning a place with real devices: the Turn-Back-and-Look state machine driven through
-the HAL (SPEC §3.2). The same function runs in the daemon and in the evaluator (with the
-simulator in lock-step)."""
+"""Learning a place: the Turn-Back-and-Look state machine (daemon/mapping/tbl.py) driven
+with frames, odometry and moves (design §3.2, thesis §4.3).
+
+One loop, :func:`drive_tbl`, for every caller. What differs is where frames and odometry
+come from (:class:`Sensors`): in the daemon from the components that own the devices
+(daemon/service/learn_job.py), in the evaluator straight from the HAL devices with the
+simulator in lock-step (:class:`DeviceSensors`). Moves go to a :class:`Mover`: the base
+device itself, or the daemon's base component.
+"""
 
 from __future__ import annotations
 
 import logging
 import threading
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
 from daemon.localisation.odometry import OdometryBuffer
 from daemon.mapping.settings import TblSettings
 from daemon.mapping.tbl import CandidateChooser, Progress, TurnBackAndLook
 from daemon.vision.landmarks import LandmarkSet
 from daemon.vision.unwarp import Unwarper
-from kernel.errors import DeviceTimeoutError, HalError, LearningAbortedError, LearningError
+from hal.base.base import BaseInfo, BaseStatus
+from kernel.errors import (
+    DeviceTimeoutError,
+    HalError,
+    LearningAbortedError,
+    LearningError,
+    LearningRefusedError,
+)
 from kernel.types import Frame, Odometry
 
 log = logging.getLogger(__name__)
@@ -22,36 +35,62 @@ log = logging.getLogger(__name__)
 ProgressCallback = Callable[[Progress], None]
 
 
-class _Sensors:
-    """Frames and the odometry at their stamps."""
+class Sensors(Protocol):
+    rate_hz: float  # frames per second, to turn the move timeout into frames
+
+    def frame(self) -> tuple[Frame, Odometry]:
+        """The next frame and the odometry at its stamp; LearningError when either stops."""
+
+
+class Mover(Protocol):
+    @property
+    def info(self) -> BaseInfo: ...
+
+    def move_relative(self, dx: float, dy: float, dyaw: float, speed: float) -> None: ...
+
+    def status(self) -> BaseStatus: ...
+
+    def stop(self) -> None: ...
+
+
+def odometry_at_frame(buffer: OdometryBuffer, frame: Frame,
+                      read: Callable[[], list[Odometry]]) -> Odometry:
+    """The odometry at ``frame``'s stamp, reading more samples (``read``) until the buffer
+    reaches just past it."""
+    for _ in range(50):
+        latest = buffer.latest
+        if latest is not None and latest.stamp_ns >= frame.stamp_ns:
+            break
+        try:
+            buffer.extend(read())
+        except DeviceTimeoutError as e:
+            raise LearningError(f"odometry stopped arriving during learning: {e}") from e
+    odo = buffer.at(frame.stamp_ns, max_extrapolation_ns=100_000_000)
+    if odo is None:
+        raise LearningError("no odometry at the frame's time: cannot learn")
+    return odo
+
+
+class DeviceSensors:
+    """Frames and odometry read from the devices themselves (the evaluator, tests)."""
 
     def __init__(self, camera: Any, base: Any, settings: TblSettings) -> None:
         self.camera, self.base, self.settings = camera, base, settings
         self.odometry = OdometryBuffer()
+        self.rate_hz = float(getattr(camera.info, "rate_hz", 0.0) or 10.0)
 
     def frame(self) -> tuple[Frame, Odometry]:
         try:
             frame: Frame = self.camera.read(self.settings.frame_timeout_s)
         except DeviceTimeoutError as e:
             raise LearningError(f"frames stopped arriving during learning: {e}") from e
-        for _ in range(50):  # odometry up to (and just past) the frame's stamp
-            latest = self.odometry.latest
-            if latest is not None and latest.stamp_ns >= frame.stamp_ns:
-                break
-            try:
-                self.odometry.extend(self.base.read(0.2))
-            except DeviceTimeoutError as e:
-                raise LearningError(f"odometry stopped arriving during learning: {e}") from e
-        odo = self.odometry.at(frame.stamp_ns, max_extrapolation_ns=100_000_000)
-        if odo is None:
-            raise LearningError("no odometry at the frame's time: cannot learn")
-        return frame, odo
+        return frame, odometry_at_frame(self.odometry, frame, lambda: self.base.read(0.2))
 
 
 def learn_place(camera: Any, base: Any, unwarper: Unwarper, settings: TblSettings, *,
                 progress: ProgressCallback | None = None,
                 abort: threading.Event | None = None) -> LandmarkSet:
-    """Turn Back and Look at the current pose; returns the place's landmark set."""
+    """Turn Back and Look at the current pose with the devices; the place's landmark set."""
     return run_tbl(camera, base, unwarper, settings, progress=progress, abort=abort).result()
 
 
@@ -59,51 +98,62 @@ def run_tbl(camera: Any, base: Any, unwarper: Unwarper, settings: TblSettings, *
             progress: ProgressCallback | None = None,
             abort: threading.Event | None = None,
             choose: CandidateChooser | None = None) -> TurnBackAndLook:
-    """Drive the whole cross; returns the finished state machine (its result, and for
-    evaluation every scored candidate). ``choose``: see TurnBackAndLook.
+    """:func:`drive_tbl` reading the camera and base devices directly."""
+    return drive_tbl(DeviceSensors(camera, base, settings), base, unwarper, settings,
+                     progress=progress, abort=abort, choose=choose)
+
+
+def drive_tbl(sensors: Sensors, mover: Mover, unwarper: Unwarper, settings: TblSettings, *,
+              progress: ProgressCallback | None = None,
+              abort: threading.Event | None = None,
+              choose: CandidateChooser | None = None,
+              on_start: Callable[[Odometry], None] | None = None) -> TurnBackAndLook:
+    """Drive the whole cross; returns the finished state machine (its result, its
+    reference panorama and odometry, and for evaluation every scored candidate).
+    ``choose``: see TurnBackAndLook. ``on_start`` is told the odometry at the reference
+    pose before the robot moves.
 
     Refuses (LearningError) when the base cannot move or frames stop arriving; on
     ``abort`` the robot is stopped and LearningAbortedError raised (nothing is stored)."""
-    if not base.info.can_move:
-        raise LearningError(f"the base ({base.info.backend}) cannot move: Turn Back and Look "
-                            "needs to drive the cross")
-    sensors = _Sensors(camera, base, settings)
+    if not mover.info.can_move:
+        raise LearningRefusedError(f"the base ({mover.info.backend}) cannot move: Turn Back and "
+                            "Look needs to drive the cross")
     margin = unwarper.panorama.wrap_margin
     f1, odo = sensors.frame()
     f2, _ = sensors.frame()
     tbl = TurnBackAndLook(settings, unwarper.unwarp(f1.image), unwarper.unwarp(f2.image),
                           margin, odo, choose)
+    if on_start is not None:
+        on_start(odo)
     frames_this_leg = 0
-    max_frames_per_leg = None
+    max_frames_per_leg = max(1, int(settings.move_timeout_s * sensors.rate_hz))
     try:
         while not tbl.done:
             if abort is not None and abort.is_set():
                 raise LearningAbortedError("learning aborted on request")
             command = tbl.next_command()
             if command is not None:
-                base.move_relative(command.dx, command.dy, command.dyaw, command.speed)
+                mover.move_relative(command.dx, command.dy, command.dyaw, command.speed)
                 frames_this_leg = 0
             frame, odo = sensors.frame()
-            status = base.status()
+            status = mover.status()
             # A move only counts as done once the base has seen it: not on the first frame.
             done = status.move_done and not status.moving and frames_this_leg > 0
             step = tbl.on_frame(unwarper.unwarp(frame.image), odo, done)
             frames_this_leg += 1
-            rate = getattr(camera.info, "rate_hz", 0.0) or 10.0
-            max_frames_per_leg = max_frames_per_leg or int(settings.move_timeout_s * rate)
             if frames_this_leg > max_frames_per_leg:
                 raise LearningError(f"the base did not finish a move within "
                                     f"{settings.move_timeout_s:.0f} s")
             if progress is not None:
                 progress(step)
     except (LearningError, HalError):
-        _stop(base)
+        _stop(mover)
         raise
     return tbl
 
 
-def _stop(base: Any) -> None:
+def _stop(mover: Mover) -> None:
     try:
-        base.stop()
+        mover.stop()
     except HalError as e:  # the robot may be unreachable; report, do not mask the cause
         log.error("could not stop the base after learning failed: %s", e)

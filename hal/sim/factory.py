@@ -36,9 +36,12 @@ def build_sim_robot(config: Any, scenario: Scenario | None = None, *,
     renderer = Renderer(world, config.mirror, config.panorama,
                         (camera_settings.image_width, camera_settings.image_height)
                         ) if camera else None
-    return SimRobot(renderer, camera_settings, base, seed=sim.seed, realtime=sim.realtime,
-                    start_pose=(float(start[0]), float(start[1]), float(start[2])),
-                    scenario=scenario)
+    robot = SimRobot(renderer, camera_settings, base, seed=sim.seed, realtime=sim.realtime,
+                     start_pose=(float(start[0]), float(start[1]), float(start[2])),
+                     scenario=scenario)
+    if sim.truth_out:
+        robot.write_truth_to(sim.truth_out)
+    return robot
 
 
 def shared_sim_robot(context: Any) -> SimRobot:

@@ -64,6 +64,8 @@ class Scenario:
     start_pose: Pose | None
     waypoints: tuple[Waypoint, ...] = ()
     face_travel: bool = False
+    start_after_s: float = 0.0  # the autopilot waits this long before it drives
+    resume_after_s: float | None = None  # after a commanded move, the autopilot drives on
     duration_s: float | None = None
     frame_rate_hz: float | None = None
     noise_sigma: float | None = None
@@ -144,7 +146,8 @@ class Scenario:
 # ---------------------------------------------------------------- loading
 _TOP = {"name", "world", "start_pose", "duration_s", "frame_rate_hz", "camera", "trajectory",
         "illumination", "people", "kidnap", "drift", "camera_stall"}
-_TRAJ = {"kind", "waypoints", "speed", "laps", "loop", "extent_m", "face_travel"}
+_TRAJ = {"kind", "waypoints", "speed", "laps", "loop", "extent_m", "face_travel",
+         "start_after_s", "resume_after_s"}
 _DRIFT = {"scale_error", "heading_bias_rad_per_m", "random_walk_m_per_sqrt_m",
           "random_walk_rad_per_sqrt_m"}
 
@@ -240,6 +243,9 @@ def scenario_from_dict(data: dict[str, Any], base_dir: Path = Path(".")) -> Scen
     return Scenario(
         name=str(data.get("name", "scenario")), world=world, start_pose=start,
         waypoints=tuple(waypoints), face_travel=bool(traj.get("face_travel", False)),
+        start_after_s=_num(traj.get("start_after_s", 0.0), "trajectory.start_after_s", 0.0),
+        resume_after_s=_num(traj["resume_after_s"], "trajectory.resume_after_s", 0.0)
+        if "resume_after_s" in traj else None,
         duration_s=_num(data["duration_s"], "scenario.duration_s", 0.0)
         if "duration_s" in data else None,
         frame_rate_hz=_num(data["frame_rate_hz"], "scenario.frame_rate_hz", 0.1)

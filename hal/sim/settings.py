@@ -18,6 +18,9 @@ class SimSettings:
     realtime: bool = setting(
         True, doc="run on the wall clock (daemon) or in lock-step with frame reads (evaluation)"
     )
+    truth_out: str = setting(
+        "", doc="append the true pose at every simulation step to this JSON-lines file (for "
+        "tests and evaluation: the method never sees it); empty: not written")
     start_pose: list[float] = setting(
         [0.0, 0.0, 0.0], doc="x, y, yaw in the world frame; used when no scenario is set"
     )

@@ -1,0 +1,93 @@
+"""The zenoh requests the daemon answers, as validated dataclasses, and its replies.
+
+Every request payload is a JSON object (empty means all defaults) read by the same strict
+reader as the configuration (kernel/settings.py): unknown keys, wrong types and
+out-of-range values are refused with a message naming the field. Every reply is a JSON
+object with a ``schema`` field and a ``kind``: ``progress`` (long jobs stream these),
+``result``, or ``error`` with a stable ``code`` and a message saying why.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import Any, TypeVar
+
+from daemon.service import zenoh_link
+from kernel.errors import ConfigError, PlacecellError
+from kernel.settings import build, setting
+
+REPLY_SCHEMA = "placecell.reply"
+MAX_REQUEST_BYTES = 64 * 1024
+
+
+class ErrorCode(StrEnum):
+    BAD_REQUEST = "bad_request"  # the request itself is malformed
+    BUSY = "busy"  # another job runs
+    REFUSED = "refused"  # the daemon cannot do it now (mode, a base that cannot move...)
+    ABORTED = "aborted"  # stopped on request; nothing stored
+    FAILED = "failed"  # it was tried and went wrong
+    NOT_FOUND = "not_found"  # no such place
+    NOTHING_TO_ABORT = "nothing_to_abort"
+
+
+class RequestError(PlacecellError):
+    def __init__(self, code: ErrorCode, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+@dataclass(frozen=True)
+class LearnRequest:
+    label: str = setting("", doc="the place's name for people")
+    extent_m: float | None = setting(None, gt=0.0, le=2.0, doc="TBL cross arm; default "
+                                     "[tbl] extent_m")
+
+    def __post_init__(self) -> None:
+        if len(self.label) > 200:
+            raise ValueError("label is at most 200 characters")
+
+
+@dataclass(frozen=True)
+class AbortRequest:
+    pass
+
+
+R = TypeVar("R")
+
+
+def parse(cls: type[R], payload: bytes | None, what: str) -> R:
+    """A request of type ``cls`` from a query payload; RequestError(bad_request) if not."""
+    raw = payload or b""
+    if len(raw) > MAX_REQUEST_BYTES:
+        raise RequestError(ErrorCode.BAD_REQUEST, f"{what}: request of {len(raw)} bytes is "
+                           f"larger than {MAX_REQUEST_BYTES}")
+    if not raw.strip():
+        table: Any = {}
+    else:
+        try:
+            table = json.loads(raw.decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as e:
+            raise RequestError(ErrorCode.BAD_REQUEST, f"{what}: not a JSON object ({e})"
+                               ) from e
+    if not isinstance(table, dict):
+        raise RequestError(ErrorCode.BAD_REQUEST, f"{what}: expected a JSON object, got "
+                           f"{type(table).__name__}")
+    try:
+        return build(cls, table, what)
+    except ConfigError as e:
+        raise RequestError(ErrorCode.BAD_REQUEST, str(e)) from e
+
+
+def progress(**fields: Any) -> bytes:
+    return zenoh_link.encode(REPLY_SCHEMA, {"kind": "progress", **fields})
+
+
+def result(**fields: Any) -> bytes:
+    return zenoh_link.encode(REPLY_SCHEMA, {"kind": "result", **fields})
+
+
+def error(code: ErrorCode, message: str) -> bytes:
+    return zenoh_link.encode(REPLY_SCHEMA, {"kind": "error", "code": str(code),
+                                            "message": message})

@@ -1,0 +1,114 @@
+"""The map as the running daemon keeps it: the map file, the map in memory, and the run of
+odometry since the last place learned (design §6).
+
+Thread-safe: odometry arrives on the processing thread, places from the learn job, queries
+from zenoh's threads. A place is stored with its transition in one transaction
+(daemon/store) before the map in memory shows it.
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import logging
+import threading
+
+from daemon.mapping.graph import TopologicalMap
+from daemon.mapping.odometry_chain import OdometryChain
+from daemon.mapping.place import Place
+from daemon.mapping.settings import OdometryNoiseSettings
+from daemon.mapping.transition import Transition
+from daemon.store.sqlite_store import MapStore, PlaceSummary
+from kernel.se2 import UncertainSE2
+from kernel.types import Odometry
+
+log = logging.getLogger(__name__)
+
+
+@dataclasses.dataclass(frozen=True)
+class Link:
+    """Where a place being learned stands from the last place: T_last_new from odometry."""
+
+    from_id: int
+    T_from_new: UncertainSE2
+
+
+class Mapper:
+    def __init__(self, store: MapStore, noise: OdometryNoiseSettings) -> None:
+        self.store = store
+        self.noise = noise
+        self._lock = threading.RLock()
+        self.graph: TopologicalMap = store.load()
+        self._last_place: int | None = None  # learned in this run of odometry
+        self._chain: OdometryChain | None = None  # from that place's reference pose
+        self._pending: OdometryChain | None = None  # from the reference of a place in work
+        self._recent: collections.deque[Odometry] = collections.deque(maxlen=500)
+
+    # ------------------------------------------------------------ odometry
+    def on_odometry(self, samples: list[Odometry]) -> None:
+        with self._lock:
+            for s in samples:
+                self._recent.append(s)
+                for chain in (self._chain, self._pending):
+                    if chain is not None:
+                        chain.add(s)
+
+    def odometry_restarted(self) -> None:
+        """The base was opened again: its odometry may start from anywhere, so no
+        transition is measured across the restart."""
+        with self._lock:
+            for chain in (self._chain, self._pending):
+                if chain is not None:
+                    chain.broken = True
+
+    # ------------------------------------------------------------ learning
+    def begin_place(self, reference: Odometry) -> Link | None:
+        """A place is being learned at the pose where odometry read ``reference``: start
+        measuring from it, and say where it stands from the last place (None: no unbroken
+        run of odometry joins them)."""
+        with self._lock:
+            self._pending = OdometryChain(reference, self.noise)
+            for s in self._recent:
+                if s.stamp_ns > reference.stamp_ns:
+                    self._pending.add(s)
+            chain, last = self._chain, self._last_place
+            if chain is None or last is None or chain.broken or last not in self.graph:
+                return None
+            return Link(last, chain.relative_at(reference))
+
+    def cancel_place(self) -> None:
+        with self._lock:
+            self._pending = None
+
+    def add_place(self, place: Place, link: Link | None) -> tuple[Place, list[Transition]]:
+        """Store a learned place (with its transition from the last place, both ways) and
+        make it the one the next place is measured from."""
+        links = [] if link is None else [(link.from_id, link.T_from_new, "odometry")]
+        with self._lock:
+            stored = self.store.add_place(place, links)
+            self.graph.add_place(stored)
+            added = []
+            if link is not None:
+                t = Transition(link.from_id, stored.id, link.T_from_new, "odometry")
+                self.graph.add_transition(t)
+                added = list(t.both_ways())
+            self._last_place, self._chain, self._pending = stored.id, self._pending, None
+            return stored, added
+
+    # ------------------------------------------------------------ reading
+    def summaries(self) -> list[PlaceSummary]:
+        with self._lock:
+            return [PlaceSummary(p.id, p.label, p.created_unix_s, p.landmark_count,
+                                 p.background_lrp) for p in self.graph.places]
+
+    def transitions(self) -> list[Transition]:
+        with self._lock:
+            return self.graph.transitions
+
+    def place_count(self) -> int:
+        with self._lock:
+            return len(self.graph)
+
+    def transition_count(self) -> int:
+        with self._lock:
+            return len(self.graph.transitions)

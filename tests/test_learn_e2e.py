@@ -1,0 +1,228 @@
+"""Learning places through the running daemon, every command from other processes
+(design §6, §11): the daemon in a subprocess on a simulated scenario, placecellctl in its
+own processes, the truth read from the simulator's own truth file (the daemon never
+sees it)."""
+
+from __future__ import annotations
+
+import bisect
+import json
+import math
+import subprocess
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from kernel.se2 import SE2
+from tests.daemon_harness import (
+    REPO,
+    client_session,
+    running_daemon,
+    venv_bin,
+    wait_for,
+    write_config,
+)
+
+NO_DRIFT = {"scale_error": 0.0, "heading_bias_rad_per_m": 0.0,
+            "random_walk_m_per_sqrt_m": 0.0, "random_walk_rad_per_sqrt_m": 0.0}
+
+
+def _scenario(tmp: Path, drift: dict[str, float] | None) -> Path:
+    """The robot waits in the office corridor until a place is learned, then its
+    autopilot drives it 3 m along the corridor and stops."""
+    lines = ['name = "learn-two"', 'world = "generate:office:1"', "start_pose = [3.0, 10.0, 0.0]",
+             "[trajectory]", 'kind = "waypoints"', "speed = 0.3", "start_after_s = 100000.0",
+             "resume_after_s = 1.5", "waypoints = [[6.0, 10.0]]"]
+    if drift is not None:
+        lines.append("[drift]")
+        lines += [f"{k} = {v!r}" for k, v in drift.items()]
+    path = tmp / "learn-two.toml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+class Truth:
+    """The simulator's truth file: (stamp_ns, x, y, yaw) per simulation step."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def samples(self) -> list[tuple[int, float, float, float]]:
+        if not self.path.exists():
+            return []
+        out = []
+        for line in self.path.read_text().splitlines():
+            try:
+                d = json.loads(line)
+            except json.JSONDecodeError:
+                continue  # the line being written
+            out.append((int(d["stamp_ns"]), float(d["x"]), float(d["y"]), float(d["yaw"])))
+        return out
+
+    def at(self, stamp_ns: int) -> SE2:
+        s = self.samples()
+        i = min(bisect.bisect_left([t for t, *_ in s], stamp_ns), len(s) - 1)
+        return SE2(*s[i][1:])
+
+    def stopped_since(self, stamp_ns: int, still_s: float = 1.0) -> bool:
+        """The robot has not moved for ``still_s`` up to now, and the file reaches past
+        ``stamp_ns``."""
+        s = self.samples()
+        if not s or s[-1][0] < stamp_ns + still_s * 1e9:
+            return False
+        recent = [p for p in s if p[0] >= s[-1][0] - still_s * 1e9]
+        return max(math.dist(recent[0][1:3], p[1:3]) for p in recent) < 1e-4
+
+
+def _ctl(config: Path, *args: str, timeout: float = 240.0) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([venv_bin("placecellctl"), "--config", str(config), *args],
+                          cwd=REPO, capture_output=True, text=True, timeout=timeout)
+
+
+def _learn_popen(config: Path, label: str) -> subprocess.Popen[str]:
+    return subprocess.Popen([venv_bin("placecellctl"), "--config", str(config), "learn",
+                             "--label", label, "--json"], cwd=REPO, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def _lines(out: str) -> list[dict[str, Any]]:
+    return [json.loads(line) for line in out.splitlines() if line.strip()]
+
+
+def _transitions(port: int) -> list[dict[str, Any]]:
+    session = client_session(port)
+    try:
+        replies = [json.loads(r.ok.payload.to_bytes())
+                   for r in session.get("placecell/e2e/map/transitions", timeout=5.0)
+                   if r.ok is not None]
+    finally:
+        session.close()
+    assert replies, "no answer on map/transitions"
+    return list(replies[0]["transitions"])
+
+
+def _start(tmp: Path, drift: dict[str, float] | None) -> tuple[Path, int, Truth]:
+    truth = Truth(tmp / "truth.jsonl")
+    config, port = write_config(tmp, {"robot": {"name": "e2e"}, "sim": {
+        "scenario": str(_scenario(tmp, drift)), "truth_out": str(truth.path)}})
+    return config, port, truth
+
+
+def _wait_ready(config: Path) -> None:
+    def frames() -> bool:
+        st = _ctl(config, "status", "--json", timeout=30)
+        return st.returncode == 0 and json.loads(st.stdout)["rates"]["frames_hz"] > 0
+    assert wait_for(frames, 90, interval_s=0.5), "the daemon never delivered frames"
+
+
+def _learn_two(config: Path, truth: Truth) -> tuple[dict[str, Any], dict[str, Any]]:
+    first = _ctl(config, "learn", "--label", "dock", "--json")
+    assert first.returncode == 0, first.stderr
+    replies = _lines(first.stdout)
+    progress = [r for r in replies if r["kind"] == "progress"]
+    assert len(progress) >= 5, replies
+    assert [p["fraction"] for p in progress] == sorted(p["fraction"] for p in progress)
+    dock = replies[-1]
+    assert dock["kind"] == "result" and dock["place"]["label"] == "dock"
+    assert dock["place"]["landmarks"] == 16
+    # The autopilot drives on along the corridor and stops 3 m further.
+    start = truth.at(dock["place"]["reference_stamp_ns"])
+    assert wait_for(lambda: truth.samples() and math.dist(
+        truth.samples()[-1][1:3], (start.x, start.y)) > 2.0, 60, 0.5), "robot did not drive"
+    assert wait_for(lambda: truth.stopped_since(time.monotonic_ns() - 1_500_000_000), 60, 0.5)
+    # A second learn; a concurrent third is refused while it runs.
+    second = _learn_popen(config, "door")
+    time.sleep(4.0)
+    refused = _ctl(config, "learn", "--label", "intruder")
+    assert refused.returncode == 4, refused.stderr
+    assert "being learned already" in refused.stderr
+    out, err = second.communicate(timeout=240)
+    assert second.returncode == 0, err
+    door = _lines(out)[-1]
+    assert door["kind"] == "result"
+    assert {(t["from"], t["to"]) for t in door["transitions"]} == {
+        (dock["place"]["id"], door["place"]["id"]), (door["place"]["id"], dock["place"]["id"])}
+    return dock, door
+
+
+def _transition_error(port: int, truth: Truth, dock: dict[str, Any], door: dict[str, Any]
+                      ) -> tuple[SE2, SE2, list[list[float]]]:
+    ids = (dock["place"]["id"], door["place"]["id"])
+    forward = next(t for t in _transitions(port) if (t["from"], t["to"]) == ids)
+    measured = SE2(forward["x"], forward["y"], forward["yaw"])
+    true = truth.at(dock["place"]["reference_stamp_ns"]).between(
+        truth.at(door["place"]["reference_stamp_ns"]))
+    return measured, true, forward["covariance"]
+
+
+def test_learn_two_places_without_drift_transition_matches_truth(tmp_path: Path) -> None:
+    config, port, truth = _start(tmp_path, NO_DRIFT)
+    with running_daemon(config):
+        _wait_ready(config)
+        dock, door = _learn_two(config, truth)
+        measured, true, _ = _transition_error(port, truth, dock, door)
+        assert math.hypot(true.x, true.y) > 2.0
+        assert math.hypot(measured.x - true.x, measured.y - true.y) <= 0.02
+        assert abs(math.degrees(math.remainder(measured.yaw - true.yaw, 2 * math.pi))) <= 0.5
+        places = _ctl(config, "places", "--json")
+        assert [p["label"] for p in json.loads(places.stdout)["places"]] == ["dock", "door"]
+
+
+def test_default_drift_inside_2_sigma_and_abort_stops_the_robot(tmp_path: Path) -> None:
+    config, port, truth = _start(tmp_path, None)
+    with running_daemon(config):
+        _wait_ready(config)
+        dock, door = _learn_two(config, truth)
+        measured, true, cov = _transition_error(port, truth, dock, door)
+        sigma = [math.sqrt(cov[i][i]) for i in range(3)]
+        error = (measured.x - true.x, measured.y - true.y,
+                 math.remainder(measured.yaw - true.yaw, 2 * math.pi))
+        assert all(abs(e) <= 2 * s for e, s in zip(error, sigma, strict=True)), (error, sigma)
+        # Abort a third learn while the robot drives its cross.
+        third = _learn_popen(config, "never")
+        assert third.stdout is not None
+        for line in third.stdout:
+            if json.loads(line).get("phase") == "+x":
+                break
+        time.sleep(1.0)  # well into the first arm
+        abort = _ctl(config, "abort", "--json")
+        assert abort.returncode == 0, abort.stderr
+        received_ns = _lines(abort.stdout)[-1]["received_ns"]
+        out, err = third.communicate(timeout=60)
+        assert third.returncode == 5, (out, err)
+        assert _lines(out)[-1]["code"] == "aborted"
+        assert wait_for(lambda: truth.stopped_since(received_ns + 500_000_000, 1.0), 30, 0.5)
+        after = [p for p in truth.samples() if p[0] >= received_ns + 500_000_000]
+        assert max(math.dist(after[0][1:3], p[1:3]) for p in after) < 1e-4, \
+            "the robot still moved 0.5 s after the abort"
+        places = json.loads(_ctl(config, "places", "--json").stdout)["places"]
+        assert len(places) == 2
+
+
+@pytest.mark.parametrize("request_body", [b"[1, 2]", b'{"label": 5}', b'{"extent_m": 9}',
+                                          b'{"lable": "x"}', b"\xff\xfe", b'{"extent_m": true}'])
+def test_malformed_learn_requests_get_an_error_that_says_why(tmp_path: Path,
+                                                             request_body: bytes) -> None:
+    from daemon.service.api import ErrorCode, LearnRequest, RequestError, parse
+
+    with pytest.raises(RequestError) as e:
+        parse(LearnRequest, request_body, "learn_place")
+    assert e.value.code == ErrorCode.BAD_REQUEST and str(e.value)
+
+
+@pytest.mark.parametrize(("overrides", "why"), [
+    ({"mapping": {"mode": "localisation"}}, "localisation mode"),
+    ({"base": {"sim": {"can_move": False}}}, "cannot move"),
+])
+def test_learning_is_refused_with_the_reason(tmp_path: Path, overrides: dict[str, Any],
+                                             why: str) -> None:
+    config, _ = write_config(tmp_path, overrides)
+    with running_daemon(config):
+        _wait_ready(config)
+        refused = _ctl(config, "learn", "--label", "nope", timeout=60)
+        assert refused.returncode == 4, (refused.stdout, refused.stderr)
+        assert why in refused.stderr
+        places = _ctl(config, "places", "--json")
+        assert json.loads(places.stdout)["places"] == []
