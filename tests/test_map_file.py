@@ -45,7 +45,10 @@ def test_place_and_transitions_round_trip_both_ways(tmp_path: Path) -> None:
         assert [p.label for p in graph.places] == ["dock", "door"]
         first = graph.place(1)
         assert np.array_equal(first.landmarks.templates(), original.landmarks.templates())
-        assert np.array_equal(first.reference_panorama, original.reference_panorama)
+        assert first.reference_panorama is None  # the map in memory holds no panoramas
+        assert np.array_equal(store.reference_panorama(1), original.reference_panorama)
+        assert np.array_equal(store.place(1, panorama=True).reference_panorama,
+                              original.reference_panorama)
         assert first.landmarks.landmarks[3].depth == original.landmarks.landmarks[3].depth
         forward, back = graph.transition(1, 2), graph.transition(2, 1)
         assert forward is not None and back is not None
@@ -63,6 +66,13 @@ def test_background_lrp_is_unknown_until_measured(tmp_path: Path) -> None:
         assert store.place(1).background_lrp == pytest.approx(0.71)
 
 
+def _open_and_read_all(path: Path, geometry: str, readonly: bool) -> None:
+    """What map info, export and a daemon's start read: every place and panorama."""
+    with MapStore.open(path, geometry, readonly=readonly) as store:
+        for place in store.load().places:
+            store.reference_panorama(place.id)
+
+
 def _truncated(p: Path) -> None:
     data = p.read_bytes()
     p.write_bytes(data[: len(data) // 2])
@@ -73,6 +83,13 @@ def _corrupt_place_bytes(p: Path) -> None:
     # Inside the second place's panorama PNG: SQLite's structure stays intact.
     i = data.rfind(b"IDAT") + 400
     data[i: i + 64] = bytes(64)
+    p.write_bytes(bytes(data))
+
+
+def _corrupt_landmark_bytes(p: Path) -> None:
+    data = bytearray(p.read_bytes())
+    i = data.rfind(b"PCLS") + 200  # inside the second place's landmark set
+    data[i: i + 16] = bytes(16)
     p.write_bytes(bytes(data))
 
 
@@ -104,7 +121,8 @@ def _random_bytes(p: Path) -> None:
 
 @pytest.mark.parametrize(("damage", "geometry", "message"), [
     (_truncated, GEOMETRY, "damaged|not a readable"),
-    (_corrupt_place_bytes, GEOMETRY, "place 2 is damaged"),
+    (_corrupt_place_bytes, GEOMETRY, "place 2 is damaged .*panorama"),
+    (_corrupt_landmark_bytes, GEOMETRY, "place 2 is damaged"),
     (_corrupt_btree, GEOMETRY, "damaged|not a readable"),
     (_newer_schema, GEOMETRY, "schema version 3.*upgrade placecell"),
     (lambda p: None, "fff000", "another panorama geometry"),
@@ -119,9 +137,9 @@ def test_bad_files_are_refused_byte_for_byte_unchanged(tmp_path: Path, damage, g
     damage(path)
     before = _sha(path)
     with pytest.raises(MapStoreError, match=message):
-        MapStore.open(path, geometry).load()
+        _open_and_read_all(path, geometry, readonly=False)
     with pytest.raises(MapStoreError, match=message):
-        MapStore.open(path, geometry, readonly=True).load()
+        _open_and_read_all(path, geometry, readonly=True)
     assert _sha(path) == before
 
 
@@ -172,13 +190,15 @@ def test_export_then_import_gives_the_same_map(tmp_path: Path) -> None:
         store.set_background(2, 0.68)
         assert export_map(store, tmp_path / "out") == 2
         original = store.load()
+        panoramas = [store.reference_panorama(p.id) for p in original.places]
     assert import_map(tmp_path / "out", tmp_path / "copy.db") == 2
     with MapStore.open(tmp_path / "copy.db", GEOMETRY) as copy:
         again = copy.load()
+        assert all(np.array_equal(pano, copy.reference_panorama(p.id))
+                   for pano, p in zip(panoramas, again.places, strict=True))
     for a, b in zip(original.places, again.places, strict=True):
         assert (a.id, a.label, a.background_lrp) == (b.id, b.label, b.background_lrp)
         assert a.landmarks.templates().tobytes() == b.landmarks.templates().tobytes()
-        assert np.array_equal(a.reference_panorama, b.reference_panorama)
         for la, lb in zip(a.landmarks.landmarks, b.landmarks.landmarks, strict=True):
             assert (la.row, la.col, la.bearing, la.depth) == (lb.row, lb.col, lb.bearing,
                                                               lb.depth)

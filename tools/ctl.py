@@ -198,7 +198,9 @@ def cmd_map(args: argparse.Namespace) -> int:
     try:
         if args.map_command == "info":
             with MapStore.open(args.file, None, readonly=True) as store:
-                graph = store.load()  # every place decoded, its digest checked
+                graph = store.load()  # every place decoded, its digest checked...
+                for place in graph.places:  # ...and every panorama
+                    store.reference_panorama(place.id)
                 info = {"file": str(args.file), "schema_version": store.meta("schema_version"),
                         "geometry_checksum": store.meta("geometry_checksum"),
                         "places": len(graph), "transitions": len(graph.transitions),

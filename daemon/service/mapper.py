@@ -86,7 +86,8 @@ class Mapper:
         links = [] if link is None else [(link.from_id, link.T_from_new, "odometry")]
         with self._lock:
             stored = self.store.add_place(place, links)
-            self.graph.add_place(stored)
+            # In memory without its panorama: the map file has it (design §6).
+            self.graph.add_place(dataclasses.replace(stored, reference_panorama=None))
             added = []
             if link is not None:
                 t = Transition(link.from_id, stored.id, link.T_from_new, "odometry")

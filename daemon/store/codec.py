@@ -1,10 +1,10 @@
-"""Places to bytes and back, for the map file: landmark sets as ``.npz`` (no pickles), the
-reference panorama as a lossless PNG, each place's bytes guarded by a SHA-256 digest."""
+"""Places to bytes and back, for the map file: landmark sets in a small fixed binary layout,
+the reference panorama as a lossless PNG, each guarded by a SHA-256 digest."""
 
 from __future__ import annotations
 
 import hashlib
-import io
+import struct
 
 import cv2
 import numpy as np
@@ -12,45 +12,56 @@ import numpy as np
 from daemon.vision.landmarks import TEMPLATE, Landmark, LandmarkSet
 from kernel.errors import MapStoreError
 
-_LANDMARK_ARRAYS = ("templates", "rows", "cols", "bearings", "depths", "covariances", "scores",
-                    "shape")
+# A landmark set's bytes: a header (magic, count, panorama width and margin), then per
+# landmark, array by array, little endian: rows, cols (int32), bearings, depths, the 2 x 2
+# covariances, scores (float64), templates (16 x 16 uint8). Decoding is a few frombuffer
+# calls: a 1000-place map loads in a fraction of a second.
+_MAGIC = b"PCLS"
+_HEADER = struct.Struct("<4sIII")
+_FIELDS = (("rows", "<i4", 1), ("cols", "<i4", 1), ("bearings", "<f8", 1),
+           ("depths", "<f8", 1), ("covariances", "<f8", 4), ("scores", "<f8", 1),
+           ("templates", "u1", TEMPLATE * TEMPLATE))
 
 
 def encode_landmarks(landmarks: LandmarkSet) -> bytes:
     lms = landmarks.landmarks
-    buf = io.BytesIO()
-    np.savez(buf,
-             templates=np.stack([lm.template for lm in lms]).astype(np.uint8)
-             if lms else np.zeros((0, TEMPLATE, TEMPLATE), np.uint8),
-             rows=np.array([lm.row for lm in lms], dtype=np.int64),
-             cols=np.array([lm.col for lm in lms], dtype=np.int64),
-             bearings=np.array([lm.bearing for lm in lms], dtype=np.float64),
-             depths=np.array([lm.depth for lm in lms], dtype=np.float64),
-             covariances=np.array([lm.covariance for lm in lms], dtype=np.float64
-                                  ).reshape(len(lms), 2, 2),
-             scores=np.array([lm.score for lm in lms], dtype=np.float64),
-             shape=np.array([landmarks.width, landmarks.margin], dtype=np.int64))
-    return buf.getvalue()
+    n = len(lms)
+    arrays = {
+        "rows": [lm.row for lm in lms], "cols": [lm.col for lm in lms],
+        "bearings": [lm.bearing for lm in lms], "depths": [lm.depth for lm in lms],
+        "covariances": [np.asarray(lm.covariance, float).reshape(4) for lm in lms],
+        "scores": [lm.score for lm in lms],
+        "templates": [np.asarray(lm.template, np.uint8).reshape(-1) for lm in lms],
+    }
+    parts = [_HEADER.pack(_MAGIC, n, landmarks.width, landmarks.margin)]
+    for name, dtype, per in _FIELDS:
+        parts.append(np.asarray(arrays[name], dtype=dtype).reshape(n * per).tobytes())
+    return b"".join(parts)
 
 
 def decode_landmarks(blob: bytes, where: str) -> LandmarkSet:
-    try:
-        with np.load(io.BytesIO(blob), allow_pickle=False) as z:
-            arrays = {k: z[k] for k in _LANDMARK_ARRAYS}
-    except (OSError, ValueError, KeyError, EOFError) as e:
-        raise MapStoreError(f"{where}: the landmark set cannot be read ({e})") from e
-    n = len(arrays["templates"])
-    if arrays["templates"].shape[1:] != (TEMPLATE, TEMPLATE) or any(
-            len(arrays[k]) != n for k in _LANDMARK_ARRAYS[1:-1]):
-        raise MapStoreError(f"{where}: the landmark set's arrays do not agree in shape")
-    width, margin = (int(v) for v in arrays["shape"])
+    if len(blob) < _HEADER.size:
+        raise MapStoreError(f"{where}: the landmark set is truncated")
+    magic, n, width, margin = _HEADER.unpack_from(blob)
+    expected = _HEADER.size + sum(n * per * np.dtype(dt).itemsize for _, dt, per in _FIELDS)
+    if magic != _MAGIC or len(blob) != expected:
+        raise MapStoreError(f"{where}: the landmark set cannot be read ({len(blob)} bytes, "
+                            f"expected {expected} for {n} landmarks)")
+    arrays, offset = {}, _HEADER.size
+    for name, dtype, per in _FIELDS:
+        arrays[name] = np.frombuffer(blob, dtype=dtype, count=n * per, offset=offset
+                                     ).reshape(n, per) if per > 1 else np.frombuffer(
+            blob, dtype=dtype, count=n, offset=offset)
+        offset += n * per * np.dtype(dtype).itemsize
+    templates = arrays["templates"].reshape(n, TEMPLATE, TEMPLATE)
+    covariances = arrays["covariances"].reshape(n, 2, 2)
     lms = tuple(
-        Landmark(template=arrays["templates"][i], row=int(arrays["rows"][i]),
+        Landmark(template=templates[i].copy(), row=int(arrays["rows"][i]),
                  col=int(arrays["cols"][i]), bearing=float(arrays["bearings"][i]),
-                 depth=float(arrays["depths"][i]), covariance=arrays["covariances"][i],
+                 depth=float(arrays["depths"][i]), covariance=covariances[i].copy(),
                  score=float(arrays["scores"][i]))
         for i in range(n))
-    return LandmarkSet(lms, width, margin)
+    return LandmarkSet(lms, int(width), int(margin))
 
 
 def encode_image(image: np.ndarray) -> bytes:

@@ -39,9 +39,9 @@ def export_map(store: MapStore, folder: str | Path) -> int:
     places = []
     for place in graph.places:
         places.append(_place_json(place))
-        _write_png(out / f"place-{place.id}.png",
-                   draw_landmarks(place.reference_panorama, place.landmarks))
-        _write_png(out / f"place-{place.id}-reference.png", place.reference_panorama)
+        panorama = store.reference_panorama(place.id)
+        _write_png(out / f"place-{place.id}.png", draw_landmarks(panorama, place.landmarks))
+        _write_png(out / f"place-{place.id}-reference.png", panorama)
     transitions = [_transition_json(t) for t in store.transitions()]
     _write_json(out / "places.json", places)
     _write_json(out / "transitions.json", transitions)

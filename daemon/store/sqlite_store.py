@@ -49,10 +49,11 @@ CREATE TABLE places (
     created_unix_s REAL NOT NULL,
     background_lrp REAL,
     landmark_count INTEGER NOT NULL,
-    landmarks      BLOB NOT NULL,       -- daemon/store/codec.py: npz, no pickles
+    landmarks      BLOB NOT NULL,       -- daemon/store/codec.py
     panorama       BLOB NOT NULL,       -- reference panorama, lossless PNG
     local_space    BLOB,                -- 16 float64 (chapter 5), NULL until measured
-    digest         TEXT NOT NULL        -- sha256 over landmarks, panorama, local_space
+    digest         TEXT NOT NULL,       -- sha256 over landmarks and local_space
+    panorama_digest TEXT NOT NULL       -- sha256 over panorama
 );
 CREATE TABLE transitions (
     from_id    INTEGER NOT NULL REFERENCES places(id),
@@ -64,6 +65,10 @@ CREATE TABLE transitions (
 );
 CREATE INDEX transitions_to ON transitions(to_id);
 """
+
+
+_PLACE_COLUMNS = ("id, label, created_unix_s, background_lrp, landmarks, local_space, "
+                  "digest")
 
 
 @dataclass(frozen=True)
@@ -160,18 +165,27 @@ class MapStore:
         return [PlaceSummary(int(r[0]), str(r[1]), float(r[2]), int(r[3]),
                              None if r[4] is None else float(r[4])) for r in rows]
 
-    def place(self, place_id: int) -> Place:
-        row = self._one("SELECT id, label, created_unix_s, background_lrp, landmarks, "
-                        "panorama, local_space, digest FROM places WHERE id = ?", (place_id,))
+    def place(self, place_id: int, *, panorama: bool = False) -> Place:
+        """A place by id (indexed); with its reference panorama if asked."""
+        row = self._one(f"SELECT {_PLACE_COLUMNS} FROM places WHERE id = ?", (place_id,))
         if row is None:
             raise KeyError(place_id)
-        return self._decode_place(row)
+        place = self._decode_place(row)
+        if panorama:
+            place = dataclasses.replace(place, reference_panorama=self.reference_panorama(
+                place_id))
+        return place
 
-    def panorama_png(self, place_id: int) -> bytes:
-        row = self._one("SELECT panorama FROM places WHERE id = ?", (place_id,))
+    def reference_panorama(self, place_id: int) -> np.ndarray:
+        row = self._one("SELECT panorama, panorama_digest FROM places WHERE id = ?",
+                        (place_id,))
         if row is None:
             raise KeyError(place_id)
-        return bytes(row[0])
+        where = f"{self.path}: place {place_id}"
+        if codec.digest(row[0]) != row[1]:
+            raise MapStoreError(f"{where} is damaged (its panorama's bytes do not match "
+                                "their digest)")
+        return codec.decode_image(bytes(row[0]), where)
 
     def neighbours(self, place_id: int) -> list[Transition]:
         """Transitions out of ``place_id`` (indexed: no scan)."""
@@ -185,21 +199,20 @@ class MapStore:
         return [_transition(r) for r in rows]
 
     def load(self) -> TopologicalMap:
-        """The whole map in memory; every place's digest checked."""
-        rows = self._all("SELECT id, label, created_unix_s, background_lrp, landmarks, "
-                         "panorama, local_space, digest FROM places ORDER BY id")
+        """The whole map in memory without the reference panoramas (read them with
+        :meth:`reference_panorama`); every landmark set's digest checked."""
+        rows = self._all(f"SELECT {_PLACE_COLUMNS} FROM places ORDER BY id")
         places = [self._decode_place(r) for r in rows]
         return TopologicalMap(places, self.transitions())
 
     def _decode_place(self, row: Sequence[Any]) -> Place:
-        pid, label, created, background, lm_blob, pano_blob, ls_blob, stored = row
+        pid, label, created, background, lm_blob, ls_blob, stored = row
         where = f"{self.path}: place {pid}"
-        if codec.digest(lm_blob, pano_blob, ls_blob) != stored:
+        if codec.digest(lm_blob, ls_blob) != stored:
             raise MapStoreError(f"{where} is damaged (its bytes do not match their digest)")
         landmarks = codec.decode_landmarks(bytes(lm_blob), where)
-        panorama = codec.decode_image(bytes(pano_blob), where)
         try:
-            return Place(landmarks, panorama, label=str(label), created_unix_s=float(created),
+            return Place(landmarks, None, label=str(label), created_unix_s=float(created),
                          background_lrp=None if background is None else float(background),
                          local_space=codec.decode_vector(ls_blob), id=int(pid))
         except ValueError as e:
@@ -244,15 +257,18 @@ class MapStore:
                              (float(background_lrp), place_id))
 
     def _insert_place(self, place: Place, keep_id: bool) -> int:
+        if place.reference_panorama is None:
+            raise MapStoreError("a place is stored with its reference panorama")
         lm = codec.encode_landmarks(place.landmarks)
         pano = codec.encode_image(place.reference_panorama)
         ls = codec.encode_vector(place.local_space)
         cur = self._db.execute(
             "INSERT INTO places(id, label, created_unix_s, background_lrp, landmark_count, "
-            "landmarks, panorama, local_space, digest) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            "landmarks, panorama, local_space, digest, panorama_digest) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             (place.id if keep_id else None, place.label, place.created_unix_s,
              place.background_lrp, place.landmark_count, lm, pano, ls,
-             codec.digest(lm, pano, ls)))
+             codec.digest(lm, ls), codec.digest(pano)))
         return int(cur.lastrowid or 0)
 
     def _put_transition(self, t: Transition) -> None:

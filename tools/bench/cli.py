@@ -17,6 +17,7 @@ from tools.bench.timing import pin_to_one_core
 GROUPS = {
     "sim": "tools.bench.sim",
     "landmarks": "tools.bench.landmarks",
+    "mapfile": "tools.bench.mapfile",
 }
 
 
