@@ -7,6 +7,7 @@ along paths, and kidnap events. It is pure data plus the autopilot's control law
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -147,7 +148,7 @@ class Scenario:
 _TOP = {"name", "world", "start_pose", "duration_s", "frame_rate_hz", "camera", "trajectory",
         "illumination", "people", "kidnap", "drift", "camera_stall"}
 _TRAJ = {"kind", "waypoints", "speed", "laps", "loop", "extent_m", "face_travel",
-         "start_after_s", "resume_after_s"}
+         "start_after_s", "resume_after_s", "clearance_m"}
 _DRIFT = {"scale_error", "heading_bias_rad_per_m", "random_walk_m_per_sqrt_m",
           "random_walk_rad_per_sqrt_m"}
 
@@ -205,7 +206,7 @@ def scenario_from_dict(data: dict[str, Any], base_dir: Path = Path(".")) -> Scen
         world = str((base_dir / world).resolve())
     start = _pose(data["start_pose"], "scenario.start_pose") if "start_pose" in data else None
     traj = _keys(data.get("trajectory", {"kind": "none"}), _TRAJ, "trajectory")
-    waypoints = _trajectory(traj, start)
+    waypoints = _trajectory(traj, start, world)
     cam = _keys(data.get("camera", {}), {"noise_sigma", "blur_sigma_px"}, "camera")
     ill = _keys(data.get("illumination", {}), {"gain", "schedule"}, "illumination")
     if "schedule" in ill:
@@ -260,11 +261,25 @@ def scenario_from_dict(data: dict[str, Any], base_dir: Path = Path(".")) -> Scen
         camera_stalls=tuple(stalls))
 
 
-def _trajectory(traj: dict[str, Any], start: Pose | None) -> list[Waypoint]:
+def _trajectory(traj: dict[str, Any], start: Pose | None, world: str) -> list[Waypoint]:
     kind = traj.get("kind", "none")
     speed = _num(traj.get("speed", 0.3), "trajectory.speed", 0.01)
     if kind == "none":
         return []
+    if kind == "tour":  # through every room of the world and back (hal/sim/tour.py)
+        from hal.sim.tour import TourError, plan_tour
+        from hal.sim.world import load_world
+
+        laps = int(_num(traj.get("laps", 1), "trajectory.laps", 1))
+        clearance = _num(traj.get("clearance_m", 0.4), "trajectory.clearance_m", 0.0)
+        w = load_world(world)
+        if start is not None:
+            w = dataclasses.replace(w, start_pose=start)
+        try:
+            points = plan_tour(w, clearance, laps)
+        except TourError as e:
+            raise ConfigError(f"trajectory.kind 'tour': {e}") from e
+        return [Waypoint(x, y, speed) for x, y in points]
     if kind == "waypoints":
         out = []
         for i, p in enumerate(traj.get("waypoints", [])):
@@ -293,4 +308,5 @@ def _trajectory(traj: dict[str, Any], start: Pose | None) -> list[Waypoint]:
         out = [Waypoint(px, py, speed) for _ in range(laps) for px, py in pts]
         out.append(Waypoint(pts[0][0], pts[0][1], speed))
         return out
-    raise ConfigError(f"trajectory.kind: {kind!r} is not one of none, waypoints, tbl, loop")
+    raise ConfigError(f"trajectory.kind: {kind!r} is not one of none, waypoints, tbl, loop, "
+                      "tour")
