@@ -277,8 +277,8 @@ def _trajectory(traj: dict[str, Any], start: Pose | None, world: str) -> list[Wa
             w = dataclasses.replace(w, start_pose=start)
         try:
             points = plan_tour(w, clearance, laps)
-        except TourError as e:
-            raise ConfigError(f"trajectory.kind 'tour': {e}") from e
+        except TourError as why:
+            raise ConfigError(f"trajectory.kind 'tour': {why}") from why
         return [Waypoint(x, y, speed) for x, y in points]
     if kind == "waypoints":
         out = []
