@@ -226,3 +226,23 @@ def test_learning_is_refused_with_the_reason(tmp_path: Path, overrides: dict[str
         assert why in refused.stderr
         places = _ctl(config, "places", "--json")
         assert json.loads(places.stdout)["places"] == []
+
+
+def test_autonomous_acquisition_learns_places_as_the_robot_tours(tmp_path: Path) -> None:
+    scenario = tmp_path / "tour.toml"
+    scenario.write_text('name = "tour"\nworld = "generate:open-room:1"\n[trajectory]\n'
+                        'kind = "tour"\nspeed = 0.3\nresume_after_s = 1.0\n')
+    config, port = write_config(tmp_path, {"robot": {"name": "e2e"}, "sim": {
+        "scenario": str(scenario)}, "mapping": {"acquisition": {"enabled": True}}})
+    with running_daemon(config):
+        _wait_ready(config)
+
+        def places() -> list[dict[str, Any]]:
+            out = _ctl(config, "places", "--json", timeout=30)
+            return list(json.loads(out.stdout)["places"]) if out.returncode == 0 else []
+
+        assert wait_for(lambda: len(places()) >= 2, 180, 1.0), places()
+        first = places()[0]
+        assert first["background_lrp"] is not None and 0.3 < first["background_lrp"] < 0.9
+        pairs = {(t["from"], t["to"]) for t in _transitions(port)}
+        assert (1, 2) in pairs and (2, 1) in pairs

@@ -79,3 +79,31 @@ class MappingSettings:
 
     mode: Literal["mapping", "localisation"] = setting(
         "mapping", doc="mapping: places may be learned; localisation: the map is read-only")
+    acquisition: AcquisitionSettings = setting(default_factory=lambda: AcquisitionSettings())
+
+
+@dataclass(frozen=True)
+class AcquisitionSettings:
+    """When to learn a new place on the robot's own (design §6, thesis §7.1): the LRP of the
+    most recent place, smoothed against distance travelled, has settled at its background."""
+
+    enabled: bool = setting(False, doc="learn places on the robot's own in mapping mode")
+    sample_step_m: float = setting(0.05, gt=0.0, le=1.0, doc="the LRP is sampled every this "
+                                   "far travelled (frames while stationary or only turning "
+                                   "add nothing)")
+    window_m: float = setting(0.5, gt=0.0, le=10.0, doc="moving-average window and slope "
+                              "baseline, in metres travelled")
+    slope_threshold: float = setting(0.01, gt=0.0, le=1.0, doc="background: the smoothed "
+                                     "change of the smoothed LRP over window_m below this...")
+    lrp_background: float = setting(0.7, ge=0.0, le=1.0, doc="...while the LRP is between "
+                                    "this (below it counts as background at once)...")
+    lrp_max: float = setting(0.85, ge=0.0, le=1.0, doc="...and this")
+    min_distance_m: float = setting(0.75, ge=0.0, le=100.0, doc="travelled at least this "
+                                    "far from the last place before a new one is learned")
+    background_window_m: float = setting(3.0, gt=0.0, le=100.0, doc="after the decision, "
+                                         "the place's background LRP is the median of its LRP "
+                                         "over this far travelled (the level it settles at)")
+    recognition_margin: float = setting(0.05, ge=0.0, le=1.0, doc="when the background is "
+                                        "reached, a known place whose LRP is this far above "
+                                        "its own background is watched instead of learning "
+                                        "a new one (back on a known path)")

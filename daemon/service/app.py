@@ -38,6 +38,7 @@ from daemon.service.supervisor import Supervisor, describe
 from daemon.store.sqlite_store import MapStore
 from daemon.vision.unwarp import Unwarper
 from hal.registry import HalContext, create_base, create_camera
+from kernel.errors import PlacecellError
 from kernel.panorama import geometry_checksum
 
 log = logging.getLogger(__name__)
@@ -71,6 +72,7 @@ class Daemon:
         self._job_lock = threading.Lock()
         self._job: LearnJob | None = None
         self._queryables: list[Any] = []
+        self._acquire_after = 0.0  # monotonic s: no autonomous learning before
         self.supervisor = Supervisor(
             config.service.restart_backoff_initial_s, config.service.restart_backoff_max_s,
             on_event=self.publish_event,
@@ -93,13 +95,24 @@ class Daemon:
         self.base = base_component(
             lambda: create_base(cfg.base, self.hal), cfg.base.read_timeout_s, inbox.put,
             lambda: sup.health["base"], odo_taps, on_open=self.mapper.odometry_restarted)
+        acquisition = cfg.mapping.acquisition if cfg.mapping.mode == "mapping" else None
         self.processing = ProcessingComponent(
-            lambda: Localiser(cfg.mirror, cfg.panorama, places=self.mapper.place_count()),
+            lambda: self._localiser(acquisition),
             mailbox, inbox, self._on_belief, lambda: sup.health["processing"],
             odometry_taps=[self.mapper.on_odometry, self._job_odometry],
             frame_taps=[self._job_frame])
         for c in (self.camera, self.base, self.processing):
             sup.add(c)
+
+    def _localiser(self, acquisition: Any) -> Localiser:
+        localiser = Localiser(self.config.mirror, self.config.panorama,
+                              places=self.mapper.place_count(), acquisition=acquisition)
+        for place in self.mapper.graph.places:
+            localiser.know_place(place)
+        last = self.mapper.last_place
+        if last is not None:  # a restarted processing component goes on watching it
+            localiser.watch_place(self.mapper.graph.place(last))
+        return localiser
 
     def _record_odometry(self, samples: list[Any], base: Any) -> None:
         for s in samples:
@@ -147,6 +160,42 @@ class Daemon:
             return
         log.info("learning a place (label %r) at the operator's request", job.label)
 
+    # ------------------------------------------------------------ autonomous acquisition
+    def _maybe_acquire(self, belief: Belief) -> None:
+        """Learn a place on the robot's own (design §6): the first one as soon as the robot
+        can learn, then each time the last place's LRP has settled at its background."""
+        acq = self.config.mapping.acquisition
+        for place_id, background in belief.backgrounds:
+            self.mapper.set_background(place_id, background)
+            self.publish_event("background_measured", place=place_id,
+                               background_lrp=round(background, 4))
+        if not acq.enabled or self.config.mapping.mode != "mapping" or self._job is not None \
+                or not belief.odometry_ok or time.monotonic() < self._acquire_after:
+            return
+        decision = belief.acquisition
+        if decision is None and self.mapper.last_place is not None:
+            return
+        if decision is not None:
+            self.mapper.set_background(decision.place_id, decision.background_lrp)
+            localiser = self.processing.localiser
+            if localiser is not None:
+                localiser.know_place(self.mapper.graph.place(decision.place_id))
+            self.publish_event("background_reached", place=decision.place_id,
+                               lrp=round(decision.background_lrp, 4),
+                               distance_m=round(decision.distance_m, 3))
+
+        def log_reply(kind: str, fields: dict[str, Any]) -> None:
+            if kind == "error":
+                log.warning("autonomous learning: %s", fields.get("message"))
+
+        try:
+            self._start_learning(api.LearnRequest(), log_reply)
+            log.info("learning a place on my own (%s)", "the first one" if decision is None
+                     else f"place {decision.place_id}'s background reached")
+        except api.RequestError as e:
+            log.warning("autonomous learning not started: %s", e)
+            self._acquire_after = time.monotonic() + 10.0
+
     def _start_learning(self, request: api.LearnRequest, reply: Any) -> LearnJob:
         if self.config.mapping.mode != "mapping":
             raise api.RequestError(api.ErrorCode.REFUSED, "the daemon is in localisation "
@@ -179,6 +228,11 @@ class Daemon:
         with self._job_lock:
             if self._job is job:
                 self._job = None
+        if outcome.place is None and self.config.mapping.acquisition.enabled:
+            self._acquire_after = time.monotonic() + 10.0  # do not retry at once
+        localiser = self.processing.localiser
+        if outcome.place is not None and localiser is not None:
+            localiser.watch_place(outcome.place)
         if outcome.place is not None:
             p = outcome.place
             self.publish_event("place_learned", place=p.id, label=p.label,
@@ -245,6 +299,11 @@ class Daemon:
         self._belief_received_ns = time.monotonic_ns()
         body = _belief_body(belief)
         self.publish("belief", zenoh_link.encode("placecell.belief", body))
+        try:
+            self._maybe_acquire(belief)
+        except PlacecellError as e:  # the map file refused: say so, keep localising
+            log.error("autonomous acquisition: %s", e)
+            self._acquire_after = time.monotonic() + 10.0
         if self.recorder is not None:
             self.recorder.write_json("belief", belief.stamp_ns, body)
 
@@ -394,7 +453,10 @@ def _try_reply(query: zenoh.Query, payload: bytes) -> None:
 def _belief_body(belief: Belief) -> dict[str, Any]:
     return {"stamp_ns": belief.stamp_ns, "state": belief.state, "reason": belief.reason,
             "odometry_ok": belief.odometry_ok, "place_id": belief.place_id,
-            "pose_in_place": belief.pose_in_place}
+            "pose_in_place": belief.pose_in_place,
+            "recent_place": None if belief.recent_place is None else {
+                "id": belief.recent_place, "lrp": None if belief.recent_place_lrp is None
+                else round(belief.recent_place_lrp, 4)}}
 
 
 def _zenoh_version() -> str:

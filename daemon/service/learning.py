@@ -74,17 +74,25 @@ def odometry_at_frame(buffer: OdometryBuffer, frame: Frame,
 class DeviceSensors:
     """Frames and odometry read from the devices themselves (the evaluator, tests)."""
 
-    def __init__(self, camera: Any, base: Any, settings: TblSettings) -> None:
+    def __init__(self, camera: Any, base: Any, settings: TblSettings,
+                 on_odometry: Callable[[list[Odometry]], None] | None = None) -> None:
         self.camera, self.base, self.settings = camera, base, settings
         self.odometry = OdometryBuffer()
         self.rate_hz = float(getattr(camera.info, "rate_hz", 0.0) or 10.0)
+        self._on_odometry = on_odometry  # every sample read is also handed here
 
     def frame(self) -> tuple[Frame, Odometry]:
         try:
             frame: Frame = self.camera.read(self.settings.frame_timeout_s)
         except DeviceTimeoutError as e:
             raise LearningError(f"frames stopped arriving during learning: {e}") from e
-        return frame, odometry_at_frame(self.odometry, frame, lambda: self.base.read(0.2))
+        return frame, odometry_at_frame(self.odometry, frame, self._read)
+
+    def _read(self) -> list[Odometry]:
+        samples: list[Odometry] = self.base.read(0.2)
+        if self._on_odometry is not None:
+            self._on_odometry(samples)
+        return samples
 
 
 def learn_place(camera: Any, base: Any, unwarper: Unwarper, settings: TblSettings, *,
@@ -119,6 +127,7 @@ def drive_tbl(sensors: Sensors, mover: Mover, unwarper: Unwarper, settings: TblS
         raise LearningRefusedError(f"the base ({mover.info.backend}) cannot move: Turn Back and "
                             "Look needs to drive the cross")
     margin = unwarper.panorama.wrap_margin
+    _come_to_rest(sensors, mover, settings)
     f1, odo = sensors.frame()
     f2, _ = sensors.frame()
     tbl = TurnBackAndLook(settings, unwarper.unwarp(f1.image), unwarper.unwarp(f2.image),
@@ -150,6 +159,17 @@ def drive_tbl(sensors: Sensors, mover: Mover, unwarper: Unwarper, settings: TblS
         _stop(mover)
         raise
     return tbl
+
+
+def _come_to_rest(sensors: Sensors, mover: Mover, settings: TblSettings) -> None:
+    """Stop the robot (it may be driving: autonomous acquisition, teleop) and wait until it
+    stands still, so the two reference frames are taken at one pose (§4.2)."""
+    mover.stop()
+    for _ in range(max(2, int(settings.move_timeout_s * sensors.rate_hz))):
+        if not mover.status().moving:
+            return
+        sensors.frame()
+    raise LearningError(f"the base did not come to rest within {settings.move_timeout_s:.0f} s")
 
 
 def _stop(mover: Mover) -> None:

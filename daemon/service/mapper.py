@@ -96,6 +96,20 @@ class Mapper:
             self._last_place, self._chain, self._pending = stored.id, self._pending, None
             return stored, added
 
+    def set_background(self, place_id: int, background_lrp: float) -> None:
+        """The place's background LRP, measured as the robot left it (design §6)."""
+        with self._lock:
+            self.store.set_background(place_id, background_lrp)
+            if place_id in self.graph:
+                self.graph.add_place(dataclasses.replace(self.graph.place(place_id),
+                                                         background_lrp=background_lrp))
+
+    @property
+    def last_place(self) -> int | None:
+        """The place learned last in this run of the daemon (autonomous acquisition
+        watches it)."""
+        return self._last_place
+
     # ------------------------------------------------------------ reading
     def summaries(self) -> list[PlaceSummary]:
         with self._lock:

@@ -285,10 +285,11 @@ class SimRobot:
             self._vel = (vx, vy, w)
 
     def stop(self) -> None:
-        """Stop and stay stopped: an operator's stop is not followed by the autopilot."""
+        """Stop; a scenario that resumes its autopilot after commands does so after this
+        too (its driver plans again), else the robot stays stopped."""
         with self._lock:
             self._commanded = True
-            self._move_done_at_ns = None
+            self._move_done_at_ns = self._t_ns
             self._move = None
             self._vel = (0.0, 0.0, 0.0)
 
@@ -298,6 +299,10 @@ class SimRobot:
             self._pose = (x, y, float(wrap_angle(yaw)))
             self._move = None
             self._current = (0.0, 0.0, 0.0)
+
+    def autopilot_done(self) -> bool:
+        """The scenario's autopilot has passed its last waypoint (truth interface)."""
+        return self.scenario is None or self._waypoint >= len(self.scenario.waypoints)
 
     def true_pose(self) -> tuple[float, float, float]:
         return self._pose

@@ -1,0 +1,116 @@
+"""Deciding on the robot's own when to learn a new place (design §6, thesis §7.1).
+
+Watch the LRP of the most recent place as the robot moves away from it. Near the place
+the LRP is high and falls; far from it, it settles at the set's *background*. The thesis
+smooths the LRP over N frames, takes the windowed slope s_i = |LRP'_i − LRP'_{i−N}|,
+smooths that again, and declares the background reached when the smoothed slope falls
+below a threshold while the LRP lies between the default background (0.7) and the
+maximum (0.85); an LRP below 0.7 is background at once. Here the samples are taken
+against *distance travelled* (odometry), not frames, so the robot's speed does not change
+the decision; frames while stationary or only turning add nothing.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+from daemon.mapping.settings import AcquisitionSettings
+from kernel.types import Odometry
+
+
+@dataclass(frozen=True)
+class AcquisitionDecision:
+    """Learn a new place here; the last place's background LRP is ``background_lrp``."""
+
+    place_id: int
+    background_lrp: float
+    distance_m: float  # travelled since the place
+
+
+class PlaceAcquisition:
+    def __init__(self, settings: AcquisitionSettings) -> None:
+        self.settings = settings
+        self._n = max(2, int(round(settings.window_m / settings.sample_step_m)))
+        self.place_id: int | None = None
+        self.reset(None)
+
+    def reset(self, place_id: int | None) -> None:
+        """Watch ``place_id`` from here on (None: no place to watch)."""
+        self.place_id = place_id
+        self.distance_m = 0.0
+        self._since_sample = 0.0
+        self._pending: list[float] = []
+        self._lrp: deque[float] = deque(maxlen=self._n)  # raw samples
+        self._smooth: deque[float] = deque(maxlen=self._n + 1)  # LRP'
+        self._slope: deque[float] = deque(maxlen=self._n)  # s_i
+        self._last: Odometry | None = None
+        self.smoothed_lrp: float | None = None
+        self.smoothed_slope: float | None = None
+
+    def observe(self, lrp: float, odometry: Odometry | None) -> AcquisitionDecision | None:
+        """One frame: the watched place's LRP and the odometry at the frame."""
+        if self.place_id is None or odometry is None:
+            return None
+        last, self._last = self._last, odometry
+        if last is None:
+            return None
+        step = math.hypot(odometry.x - last.x, odometry.y - last.y)
+        if step < 1e-4:  # stationary or turning on the spot: no new information
+            return None
+        self.distance_m += step
+        self._since_sample += step
+        self._pending.append(lrp)
+        if self._since_sample < self.settings.sample_step_m:
+            return None
+        self._since_sample = 0.0
+        self._lrp.append(sum(self._pending) / len(self._pending))
+        self._pending = []
+        return self._decide()
+
+    def _decide(self) -> AcquisitionDecision | None:
+        s = self.settings
+        self._smooth.append(sum(self._lrp) / len(self._lrp))  # LRP' (moving average)
+        m = self._smooth[-1]
+        self.smoothed_lrp = m
+        if len(self._smooth) > self._n:
+            self._slope.append(abs(self._smooth[-1] - self._smooth[0]))  # s_i
+            self.smoothed_slope = sum(self._slope) / len(self._slope)
+        if self.distance_m < s.min_distance_m or len(self._lrp) < self._n:
+            return None
+        assert self.place_id is not None
+        if m < s.lrp_background:  # below the default background: reached at once
+            return AcquisitionDecision(self.place_id, m, self.distance_m)
+        slope = self.smoothed_slope
+        if slope is not None and len(self._slope) == self._n and slope < s.slope_threshold \
+                and m <= s.lrp_max:
+            return AcquisitionDecision(self.place_id, m, self.distance_m)
+        return None
+
+
+class BackgroundMeter:
+    """A place's background LRP (§7.1): the level its LRP settles at away from it. The
+    acquisition's decision comes when the LRP *reaches* the background (or drops below the
+    default 0.7); the level it then settles at is measured over the next ``window_m``
+    travelled: the median LRP there, frames while stationary or turning ignored."""
+
+    def __init__(self, place_id: int, first_estimate: float, window_m: float) -> None:
+        self.place_id = place_id
+        self.window_m = window_m
+        self.samples = [first_estimate]
+        self.distance_m = 0.0
+        self._last: Odometry | None = None
+
+    def observe(self, lrp: float, odometry: Odometry | None) -> float | None:
+        """The background once ``window_m`` is travelled (then once only), else None."""
+        if odometry is None:
+            return None
+        last, self._last = self._last, odometry
+        if last is None or math.hypot(odometry.x - last.x, odometry.y - last.y) < 1e-4:
+            return None
+        self.distance_m += math.hypot(odometry.x - last.x, odometry.y - last.y)
+        self.samples.append(lrp)
+        if self.distance_m < self.window_m:
+            return None
+        return float(sorted(self.samples)[len(self.samples) // 2])

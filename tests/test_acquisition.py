@@ -1,0 +1,78 @@
+"""Autonomous acquisition (daemon/mapping/acquisition.py): the decision depends on the
+distance travelled, not on the speed; standing or turning adds nothing; an LRP below the
+default background decides at once; the background is the level the LRP settles at."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from daemon.mapping.acquisition import BackgroundMeter, PlaceAcquisition
+from daemon.mapping.settings import AcquisitionSettings
+from kernel.types import Odometry
+
+SETTINGS = AcquisitionSettings(enabled=True)
+
+
+def _lrp(distance: float, background: float = 0.76) -> float:
+    """A place's LRP falling from 0.95 to its background with distance (1/e at 1 m)."""
+    return background + (0.95 - background) * math.exp(-distance)
+
+
+def _drive(speed_m_s: float, frame_rate_hz: float = 10.0, background: float = 0.76,
+           turn_every: int = 0) -> float | None:
+    """Drive straight away from the place; the distance at which the decision comes."""
+    acq = PlaceAcquisition(SETTINGS)
+    acq.reset(7)
+    x, t = 0.0, 0
+    for i in range(20000):
+        t += int(1e9 / frame_rate_hz)
+        if not (turn_every and i % turn_every == 0):
+            x += speed_m_s / frame_rate_hz
+        decision = acq.observe(_lrp(x, background), Odometry(x, 0.0, 0.01 * i, t, i))
+        if decision is not None:
+            assert decision.place_id == 7
+            return decision.distance_m
+    return None
+
+
+def test_decision_depends_on_distance_not_speed() -> None:
+    slow, fast = _drive(0.1), _drive(0.6)
+    assert slow is not None and fast is not None
+    assert abs(slow - fast) <= 2 * SETTINGS.sample_step_m + 0.06
+    assert 1.5 < slow < 8.0  # once the LRP has levelled off, not while it falls
+
+
+def test_standing_and_turning_frames_add_nothing() -> None:
+    plain = _drive(0.3)
+    with_stops = _drive(0.3, turn_every=2)  # every other frame the robot only turns
+    assert plain is not None and with_stops is not None
+    assert abs(plain - with_stops) <= 2 * SETTINGS.sample_step_m + 0.03
+
+
+def test_below_the_default_background_decides_at_once() -> None:
+    low = _drive(0.3, background=0.5)
+    high = _drive(0.3, background=0.76)
+    assert low is not None and high is not None
+    assert low < high
+    # the LRP crosses 0.7 at ln(0.45 / 0.2) = 0.81 m; the decision follows by a window
+    assert low <= math.log(0.45 / 0.2) + SETTINGS.window_m + 0.1
+
+
+def test_no_decision_without_a_watched_place_or_odometry() -> None:
+    acq = PlaceAcquisition(SETTINGS)
+    assert acq.observe(0.2, Odometry(0, 0, 0, 0, 0)) is None
+    acq.reset(3)
+    assert all(acq.observe(0.2, None) is None for _ in range(100))
+
+
+def test_background_meter_takes_the_settled_median() -> None:
+    meter = BackgroundMeter(4, 0.70, window_m=2.0)
+    values = []
+    for i in range(1, 100):
+        v = meter.observe(0.62 + 0.01 * (i % 3), Odometry(0.05 * i, 0, 0, i, i))
+        if v is not None:
+            values.append(v)
+            break
+    assert values == [pytest.approx(0.63)]
