@@ -116,7 +116,7 @@ class Localiser:
             return None, None, None, ()
         if self._watch_next is not None:
             self._watched, self._watch_next = self._watch_next, None
-            self.acquisition.reset(self._watched[0])
+            self.acquisition.reset(self._watched[0], self._expected_background())
         if self._watched is None and not self._meters:
             return None, None, None, ()
         prepared = PreparedPanorama.of(to_grey(self.panorama))
@@ -136,11 +136,16 @@ class Localiser:
         known = self._most_likely(prepared, exclude=place_id)
         if known is not None:
             self._watched = (known, self._known[known][0])
-            self.acquisition.reset(known)
+            self.acquisition.reset(known, self._expected_background())
             return place_id, lrp, None, background
         self._watched = None  # until the new place is learned and watched
         self.acquisition.reset(None)
         return place_id, lrp, decision, background
+
+    def _expected_background(self) -> float | None:
+        """The median background LRP of the places measured so far (None: none yet)."""
+        measured = sorted(b for _, b in self._known.values() if b is not None)
+        return measured[len(measured) // 2] if measured else None
 
     def _measure_backgrounds(self, prepared: PreparedPanorama, odo: Odometry | None
                              ) -> tuple[tuple[int, float], ...]:

@@ -7,7 +7,10 @@ smooths that again, and declares the background reached when the smoothed slope 
 below a threshold while the LRP lies between the default background (0.7) and the
 maximum (0.85); an LRP below 0.7 is background at once. Here the samples are taken
 against *distance travelled* (odometry), not frames, so the robot's speed does not change
-the decision; frames while stationary or only turning add nothing.
+the decision; frames while stationary or only turning add nothing. Once backgrounds have
+been measured nearby, a new place is learned a little earlier, while the last one still
+stands ``coverage_margin`` above that background: the background rule alone leaves a
+stretch before each new place where no place is recognised.
 """
 
 from __future__ import annotations
@@ -36,9 +39,11 @@ class PlaceAcquisition:
         self.place_id: int | None = None
         self.reset(None)
 
-    def reset(self, place_id: int | None) -> None:
-        """Watch ``place_id`` from here on (None: no place to watch)."""
+    def reset(self, place_id: int | None, expected_background: float | None = None) -> None:
+        """Watch ``place_id`` from here on (None: no place to watch). ``expected_background``:
+        the background LRP places here are known to settle at (see ``_decide``)."""
         self.place_id = place_id
+        self.expected_background = expected_background
         self.distance_m = 0.0
         self._since_sample = 0.0
         self._pending: list[float] = []
@@ -81,6 +86,13 @@ class PlaceAcquisition:
             return None
         assert self.place_id is not None
         if m < s.lrp_background:  # below the default background: reached at once
+            return AcquisitionDecision(self.place_id, m, self.distance_m)
+        # Beyond the thesis: learn the next place while this one is still recognised, by
+        # ``coverage_margin`` above the background the places around here settle at, so
+        # the map leaves no stretch where no place stands out.
+        expected = self.expected_background
+        if expected is not None and s.coverage_margin > 0 \
+                and m < expected + s.coverage_margin:
             return AcquisitionDecision(self.place_id, m, self.distance_m)
         slope = self.smoothed_slope
         if slope is not None and len(self._slope) == self._n and slope < s.slope_threshold \

@@ -103,6 +103,10 @@ class AcquisitionSettings:
     background_window_m: float = setting(3.0, gt=0.0, le=100.0, doc="after the decision, "
                                          "the place's background LRP is the median of its LRP "
                                          "over this far travelled (the level it settles at)")
+    coverage_margin: float = setting(0.08, ge=0.0, le=1.0, doc="once backgrounds are "
+                                     "measured, learn the next place while the last one's "
+                                     "LRP is still this far above their median (0: the "
+                                     "thesis's rule alone)")
     recognition_margin: float = setting(0.05, ge=0.0, le=1.0, doc="when the background is "
                                         "reached, a known place whose LRP is this far above "
                                         "its own background is watched instead of learning "
