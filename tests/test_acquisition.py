@@ -68,10 +68,11 @@ def test_no_decision_without_a_watched_place_or_odometry() -> None:
 
 
 def test_background_meter_takes_the_settled_median() -> None:
-    meter = BackgroundMeter(4, 0.70, window_m=2.0)
+    meter = BackgroundMeter(4, 0.70, window_m=2.0, skip_m=1.0)
     values = []
     for i in range(1, 100):
-        v = meter.observe(0.62 + 0.01 * (i % 3), Odometry(0.05 * i, 0, 0, i, i))
+        lrp = 0.9 if 0.05 * i < 1.0 else 0.62 + 0.01 * (i % 3)  # not settled in the skip
+        v = meter.observe(lrp, Odometry(0.05 * i, 0, 0, i, i))
         if v is not None:
             values.append(v)
             break

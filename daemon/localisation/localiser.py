@@ -129,8 +129,9 @@ class Localiser:
         if decision is None:
             return place_id, lrp, None, background
         # The watched place is behind us: measure the level its LRP settles at...
+        acq = self.acquisition.settings
         self._meters.append(BackgroundMeter(place_id, decision.background_lrp,
-                                            self.acquisition.settings.background_window_m))
+                                            acq.background_window_m, acq.background_skip_m))
         # ...and back on a known path another place may be recognised here (the most
         # likely place, §7.1): watch that one instead of learning.
         known = self._most_likely(prepared, exclude=place_id)

@@ -103,26 +103,32 @@ class PlaceAcquisition:
 
 class BackgroundMeter:
     """A place's background LRP (§7.1): the level its LRP settles at away from it. The
-    acquisition's decision comes when the LRP *reaches* the background (or drops below the
-    default 0.7); the level it then settles at is measured over the next ``window_m``
-    travelled: the median LRP there, frames while stationary or turning ignored."""
+    acquisition's decision comes when the LRP *reaches* the background (or earlier, see
+    ``coverage_margin``); the level it settles at is measured further on: the median LRP
+    over ``window_m`` travelled after the first ``skip_m``, frames while stationary or
+    turning ignored."""
 
-    def __init__(self, place_id: int, first_estimate: float, window_m: float) -> None:
+    def __init__(self, place_id: int, first_estimate: float, window_m: float,
+                 skip_m: float = 0.0) -> None:
         self.place_id = place_id
         self.window_m = window_m
-        self.samples = [first_estimate]
+        self.skip_m = skip_m
+        self.first_estimate = first_estimate
+        self.samples: list[float] = []
         self.distance_m = 0.0
         self._last: Odometry | None = None
 
     def observe(self, lrp: float, odometry: Odometry | None) -> float | None:
-        """The background once ``window_m`` is travelled (then once only), else None."""
+        """The background once ``skip_m + window_m`` is travelled (then once only)."""
         if odometry is None:
             return None
         last, self._last = self._last, odometry
         if last is None or math.hypot(odometry.x - last.x, odometry.y - last.y) < 1e-4:
             return None
         self.distance_m += math.hypot(odometry.x - last.x, odometry.y - last.y)
-        self.samples.append(lrp)
-        if self.distance_m < self.window_m:
+        if self.distance_m >= self.skip_m:
+            self.samples.append(lrp)
+        if self.distance_m < self.skip_m + self.window_m:
             return None
-        return float(sorted(self.samples)[len(self.samples) // 2])
+        values = sorted(self.samples) or [self.first_estimate]
+        return float(values[len(values) // 2])

@@ -103,6 +103,8 @@ class AcquisitionSettings:
     background_window_m: float = setting(3.0, gt=0.0, le=100.0, doc="after the decision, "
                                          "the place's background LRP is the median of its LRP "
                                          "over this far travelled (the level it settles at)")
+    background_skip_m: float = setting(1.0, ge=0.0, le=100.0, doc="...counted from this far "
+                                       "after the decision (nearer, the LRP has not settled)")
     coverage_margin: float = setting(0.08, ge=0.0, le=1.0, doc="once backgrounds are "
                                      "measured, learn the next place while the last one's "
                                      "LRP is still this far above their median (0: the "
