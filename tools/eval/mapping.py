@@ -35,6 +35,7 @@ from daemon.service.learning import DeviceSensors, drive_tbl
 from daemon.service.mapper import Link, Mapper
 from daemon.store.sqlite_store import MapStore
 from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
+from daemon.vision.unwarp import Unwarper
 from hal.registry import HalContext, create_base, create_camera
 from hal.sim.factory import build_sim_robot
 from hal.sim.robot import SimRobot
@@ -155,7 +156,7 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path
                 retry_at_m = path_m + RETRY_AFTER_M
                 continue
             learn_s.append((robot.now_ns() - start_ns) / 1e9)
-            ref = _reference_pose(robot, tbl.start.stamp_ns)
+            ref = _reference_pose(robot)
             stored, _ = mapper.add_place(Place(tbl.result(), tbl.reference_panorama,
                                                created_unix_s=time.time()), link[0])
             refs.append(ref)
@@ -173,7 +174,7 @@ def _begin(mapper: Mapper, link: list[Link | None], start: Any) -> None:
     link.append(mapper.begin_place(start))
 
 
-def _reference_pose(robot: SimRobot, stamp_ns: int) -> tuple[float, float, float]:
+def _reference_pose(robot: SimRobot) -> tuple[float, float, float]:
     """The true pose at a reference frame: TBL drives the cross back to it, so the pose
     when the cross is done is the reference pose (the simulator executes moves exactly)."""
     return robot.true_pose()
@@ -191,7 +192,7 @@ def _second_pass(cfg: PlacecellConfig, scenario: Scenario, places: list[Place],
     default_bg = cfg.mapping.acquisition.lrp_background
     backgrounds = [default_bg if p.background_lrp is None else p.background_lrp
                    for p in places]
-    unwarper_local = Localiser(cfg.mirror, cfg.panorama).unwarper
+    unwarper = Unwarper(cfg.mirror, cfg.panorama)
     rng = np.random.default_rng(args.seed)
     covered = total = 0
     step_ns = int(1e9 / 50)
@@ -207,7 +208,7 @@ def _second_pass(cfg: PlacecellConfig, scenario: Scenario, places: list[Place],
         run = 0.0
         assert robot.renderer is not None
         raw = robot.renderer.donut(pose, noise_sigma=cfg.camera.sim.noise_sigma, rng=rng)
-        pano = PreparedPanorama.of(to_grey(unwarper_local.unwarp(raw)))
+        pano = PreparedPanorama.of(to_grey(unwarper.unwarp(raw)))
         near = [i for i, r in enumerate(refs) if math.dist(r[:2], pose[:2]) <= args.near]
         best = max((matcher.lrp(pano, prepared[i]) - backgrounds[i] for i in near),
                    default=-1.0)
