@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.settings import MappingSettings, OdometryNoiseSettings, TblSettings
 from hal.base.settings import BaseSettings
 from hal.camera.settings import CameraSettings
@@ -74,6 +75,7 @@ class PlacecellConfig:
     tbl: TblSettings = setting(default_factory=TblSettings)
     mapping: MappingSettings = setting(default_factory=MappingSettings)
     odometry: OdometryNoiseSettings = setting(default_factory=OdometryNoiseSettings)
+    localisation: LocalisationSettings = setting(default_factory=LocalisationSettings)
     zenoh: ZenohSettings = setting(default_factory=ZenohSettings)
     map: MapSettings = setting(default_factory=MapSettings)
     service: ServiceSettings = setting(default_factory=ServiceSettings)

@@ -1,49 +1,63 @@
 """The localiser: the one pipeline that the daemon, the evaluator and the benchmarks drive.
 
-Per frame (SPEC §1): unwarp the raw image to a panorama (one ``cv2.remap``), take the
-odometry motion since the previous frame, update the belief, return it. It is pure: the
-caller hands in frames and odometry samples with their stamps; nothing here reads a clock
-or a device.
+Per frame (design §1): unwarp the raw image to a panorama (one ``cv2.remap``), take the
+odometry motion since the previous frame, track the current place's landmarks and update
+the particle filter with them (daemon/localisation/local_positioning.py), and every few
+frames recognise the current place's neighbours and, in turn, other places to pass the
+estimate on or close a cycle (daemon/localisation/place_switching.py); autonomous place
+acquisition watches the place learned last (daemon/mapping/acquisition.py). The grey
+panorama and its preparation for matching are computed once per frame and shared.
+
+It is pure: the caller hands in frames and odometry samples with their stamps; nothing
+here reads a clock (``perf_counter`` only times the steps) or a device, and the random
+generator is seeded from the settings.
 """
 
 from __future__ import annotations
 
+import math
+import threading
 import time
-from dataclasses import dataclass, field
-from typing import Literal
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
+from daemon.localisation.belief import Belief, BeliefState, PlaceScore
+from daemon.localisation.local_positioning import LocalResult, PlaceTracker
 from daemon.localisation.odometry import OdometryBuffer, relative_motion
+from daemon.localisation.place_switching import CycleClosure, PlaceSwitcher
+from daemon.localisation.sensor_models import make_model
+from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.acquisition import AcquisitionDecision, BackgroundMeter, PlaceAcquisition
+from daemon.mapping.odometry_chain import OdometryChain
 from daemon.mapping.place import Place
-from daemon.mapping.settings import AcquisitionSettings
+from daemon.mapping.settings import AcquisitionSettings, OdometryNoiseSettings
+from daemon.mapping.transition import Transition
 from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
 from daemon.vision.unwarp import Unwarper
+from kernel.errors import PlacecellError
 from kernel.panorama import to_grey
+from kernel.se2 import SE2, UncertainSE2
 from kernel.sensor_settings import MirrorSettings, PanoramaSettings
 from kernel.types import Frame, Odometry
 
-BeliefState = Literal["uninitialised", "tracking", "lost", "relocalising"]
+__all__ = ["Belief", "BeliefState", "Localiser", "PlaceScore"]
 
 
 @dataclass(frozen=True)
-class Belief:
-    """What the localiser believes after a frame (published as ``belief``/``pose``)."""
+class KnownPlace:
+    place: Place  # without its reference panorama
+    templates: PreparedTemplates
+    background: float | None
 
-    stamp_ns: int
-    state: BeliefState
-    reason: str
-    odometry_ok: bool
-    place_id: int | None = None
-    pose_in_place: tuple[float, float, float] | None = None
-    covariance: tuple[float, ...] | None = None
-    motion_since_last: tuple[float, float, float] | None = None
-    timings_ms: dict[str, float] = field(default_factory=dict)
-    recent_place: int | None = None  # the place autonomous acquisition watches...
-    recent_place_lrp: float | None = None  # ...its LRP in this frame
-    acquisition: AcquisitionDecision | None = None  # learn a new place here (design §6)
-    backgrounds: tuple[tuple[int, float], ...] = ()  # (place, background LRP) measured now
+
+@dataclass(frozen=True)
+class PoseRequest:
+    place_id: int
+    pose: tuple[float, float, float]
+    sigma_xy: float
+    sigma_yaw: float
 
 
 class Localiser:
@@ -54,61 +68,217 @@ class Localiser:
     ODOMETRY_STALE_NS = 250_000_000
 
     def __init__(self, mirror: MirrorSettings, panorama: PanoramaSettings,
-                 places: int = 0, acquisition: AcquisitionSettings | None = None) -> None:
+                 places: int = 0, acquisition: AcquisitionSettings | None = None,
+                 settings: LocalisationSettings | None = None,
+                 odometry_noise: OdometryNoiseSettings | None = None) -> None:
         self.unwarper = Unwarper(mirror, panorama)
+        self.settings = settings or LocalisationSettings()
+        self.odometry_noise = odometry_noise or OdometryNoiseSettings()
         self.odometry = OdometryBuffer()
         self.places = places
         self.panorama: np.ndarray | None = None
         self._last_odometry: Odometry | None = None
+        self._last_stamp_ns: int | None = None
         self.matcher = FastMatcher()
         self.acquisition = PlaceAcquisition(acquisition) if acquisition is not None \
             and acquisition.enabled else None
         self._watched: tuple[int, PreparedTemplates] | None = None
         self._watch_next: tuple[int, PreparedTemplates] | None = None  # from other threads
-        self._known: dict[int, tuple[PreparedTemplates, float | None]] = {}
+        self._known: dict[int, KnownPlace] = {}
+        self._links: dict[int, dict[int, UncertainSE2]] = {}  # from -> to -> T_from_to
+        self._lock = threading.Lock()  # the map and requests arrive from other threads
         self._meters: list[BackgroundMeter] = []  # places being left behind
+        self.rng = np.random.default_rng(self.settings.seed)
+        self.model = make_model(self.settings)
+        self.tracker: PlaceTracker | None = None
+        self.switcher = PlaceSwitcher(self.settings)
+        self._pose_request: PoseRequest | None = None
+        self._closure: CycleClosure | None = None
+        self._frames = 0
 
+    # ------------------------------------------------------------------ the map
     def know_place(self, place: Place) -> None:
         """A place of the map (its landmark set and background LRP, if measured). Safe to
         call from another thread."""
-        self._known = {**self._known, place.id: (
-            PreparedTemplates.of(place.landmarks.templates()), place.background_lrp)}
-        self.places = len(self._known)
+        known = KnownPlace(place, PreparedTemplates.of(place.landmarks.templates()),
+                           place.background_lrp)
+        with self._lock:
+            self._known = {**self._known, place.id: known}
+            self.places = len(self._known)
+
+    def know_transition(self, transition: Transition) -> None:
+        """A transition of the map, both ways. Safe to call from another thread."""
+        with self._lock:
+            for t in transition.both_ways():
+                self._links.setdefault(t.from_id, {})[t.to_id] = t.T_from_to
 
     def watch_place(self, place: Place) -> None:
         """Autonomous acquisition watches ``place`` (the one just learned) from the next
         frame on. Safe to call from another thread."""
         self.know_place(place)
-        self._watch_next = (place.id, self._known[place.id][0])
+        self._watch_next = (place.id, self._known[place.id].templates)
+
+    def set_pose(self, place_id: int, pose: tuple[float, float, float],
+                 sigma_xy: float | None = None, sigma_yaw: float | None = None) -> None:
+        """Start tracking at ``pose`` in place ``place_id`` from the next frame on (design
+        §7: particles spread by the sigmas, the settings' defaults when None). Safe to call
+        from another thread; PlacecellError for a place the map does not hold."""
+        if place_id not in self._known:
+            raise PlacecellError(f"place {place_id} is not in the map "
+                                 f"({len(self._known)} places)")
+        if not all(math.isfinite(v) for v in pose):
+            raise PlacecellError(f"a pose is three finite numbers, got {pose}")
+        s = self.settings
+        self._pose_request = PoseRequest(
+            place_id, (float(pose[0]), float(pose[1]), float(pose[2])),
+            s.initial_sigma_xy_m if sigma_xy is None else float(sigma_xy),
+            s.initial_sigma_yaw_rad if sigma_yaw is None else float(sigma_yaw))
 
     def add_odometry(self, samples: list[Odometry]) -> None:
         self.odometry.extend(samples)
+        closure = self._closure
+        if closure is not None:
+            for sample in samples:
+                closure.odometry.add(sample)
 
+    # ------------------------------------------------------------------ per frame
     def process_frame(self, frame: Frame) -> Belief:
         t0 = time.perf_counter()  # timing only; never used by the method
         self.panorama = self.unwarper.unwarp(frame.image)
-        unwarp_ms = (time.perf_counter() - t0) * 1e3
+        grey = to_grey(self.panorama)
+        timings = {"unwarp": (time.perf_counter() - t0) * 1e3}
         odo = self.odometry.at(frame.stamp_ns, max_extrapolation_ns=self.ODOMETRY_STALE_NS)
         motion = None
         if odo is not None and self._last_odometry is not None:
             motion = relative_motion(self._last_odometry, odo)
-        self._last_odometry = odo
-        recent, recent_lrp, decision, background = self._acquire(odo)
-        state: BeliefState = "uninitialised"
-        if self.places == 0:
-            reason = "the map has no places yet"
-        else:
-            reason = f"the map has {self.places} places; localising in them is not built yet"
-        if odo is None:
-            reason += "; no odometry at this frame (base silent): motion unknown"
-        return Belief(
-            stamp_ns=frame.stamp_ns, state=state, reason=reason, odometry_ok=odo is not None,
-            motion_since_last=motion, timings_ms={"unwarp": round(unwarp_ms, 3)},
-            recent_place=recent, recent_place_lrp=recent_lrp, acquisition=decision,
-            backgrounds=background,
-        )
+        dt_s = 0.1 if self._last_stamp_ns is None else \
+            max(1e-3, (frame.stamp_ns - self._last_stamp_ns) / 1e9)
+        self._last_odometry, self._last_stamp_ns = odo, frame.stamp_ns
+        self._frames += 1
+        prepared: list[PreparedPanorama] = []  # made at most once, when first needed
 
-    def _acquire(self, odo: Odometry | None) -> tuple[
+        def prepare() -> PreparedPanorama:
+            if not prepared:
+                prepared.append(PreparedPanorama.of(grey))
+            return prepared[0]
+
+        t1 = time.perf_counter()
+        started = self._apply_pose_request(grey, odo)
+        local = None
+        if self.tracker is not None and not started:
+            local = self.tracker.update(grey, motion, dt_s)
+        timings["positioning"] = (time.perf_counter() - t1) * 1e3
+        t2 = time.perf_counter()
+        scores: tuple[PlaceScore, ...] = ()
+        switched_from, closed = None, None
+        if self.tracker is not None and self._frames % self.settings.recognise_every == 0:
+            scores, switched_from = self._recognise(prepare(), grey, odo)
+        if self._closure is not None and local is not None and self.tracker is not None \
+                and self.tracker.place.id == self._closure.to_id:
+            closed = self._observe_closure(local)
+        timings["recognition"] = (time.perf_counter() - t2) * 1e3
+        t3 = time.perf_counter()
+        recent, recent_lrp, decision, background = self._acquire(prepare, odo)
+        timings["acquisition"] = (time.perf_counter() - t3) * 1e3
+        timings["total"] = (time.perf_counter() - t0) * 1e3
+        return self._belief(frame.stamp_ns, odo is not None, motion, local, scores,
+                            switched_from, closed, recent, recent_lrp, decision, background,
+                            {k: round(v, 3) for k, v in timings.items()})
+
+    def _apply_pose_request(self, grey: np.ndarray, odo: Odometry | None) -> bool:
+        request, self._pose_request = self._pose_request, None
+        if request is None:
+            return False
+        self.tracker = PlaceTracker(self._known[request.place_id].place, self.settings,
+                                    self.model, self.rng)
+        self.tracker.start(grey, request.pose, request.sigma_xy, request.sigma_yaw)
+        self._closure = None
+        return True
+
+    def _recognise(self, prepared: PreparedPanorama, grey: np.ndarray, odo: Odometry | None
+                   ) -> tuple[tuple[PlaceScore, ...], int | None]:
+        """LRP − background of the current place, its neighbours and a few others; pass
+        the estimate on when another place takes over (§8.2, §7.1.3)."""
+        assert self.tracker is not None and self.tracker.estimate is not None
+        current = self.tracker.place.id
+        links = self._links.get(current, {})
+        neighbours = [p for p in links if p in self._known]
+        checked = self.switcher.to_check(current, neighbours, list(self._known))
+        scores = []
+        for pid in checked:
+            known = self._known[pid]
+            lrp = self.matcher.lrp(prepared, known.templates)
+            background = self.settings.background_lrp if known.background is None \
+                else known.background
+            scores.append(PlaceScore(pid, lrp, lrp - background))
+        switch = self.switcher.decide(current, neighbours, scores)
+        if switch is None:
+            return tuple(scores), None
+        estimate = self.tracker.estimate
+        here = UncertainSE2(SE2.of(estimate.pose), estimate.covariance)
+        target = self._known[switch.place_id].place
+        tracker = PlaceTracker(target, self.settings, self.model, self.rng)
+        if switch.kind == "neighbour":
+            # §8.2, eq. 8.35: the pose in the neighbour's frame, T_to_robot = T_from_to⁻¹ ∘
+            # T_from_robot; the particles spread over both uncertainties.
+            moved = links[switch.place_id].inverse().compose(here)
+            tracker.move_to(moved.mean.as_tuple(), moved.covariance)
+        else:
+            # No transition: start over in the place (σ recovery_sigma around its reference,
+            # orientation from the bearings, §9.3.2) and measure the cycle's transition.
+            r = self.settings.recovery_sigma_m
+            tracker.start(grey, (0.0, 0.0, 0.0), r, math.pi)
+            if odo is not None:
+                self._closure = CycleClosure(current, switch.place_id, here,
+                                             OdometryChain(odo, self.odometry_noise),
+                                             self.settings)
+        self.tracker = tracker
+        return tuple(scores), current
+
+    def _observe_closure(self, local: LocalResult) -> Transition | None:
+        assert self._closure is not None
+        est = local.estimate
+        closed = self._closure.observe(UncertainSE2(SE2.of(est.pose), est.covariance),
+                                       local.confidence)
+        if closed is not None:
+            self._closure = None
+            self.know_transition(closed)
+        return closed
+
+    def _belief(self, stamp_ns: int, odometry_ok: bool,
+                motion: tuple[float, float, float] | None, local: LocalResult | None,
+                scores: tuple[PlaceScore, ...], switched_from: int | None,
+                closed: Transition | None, recent: int | None, recent_lrp: float | None,
+                decision: AcquisitionDecision | None,
+                background: tuple[tuple[int, float], ...], timings: dict[str, float]
+                ) -> Belief:
+        common = dict(stamp_ns=stamp_ns, odometry_ok=odometry_ok, motion_since_last=motion,
+                      scores=scores, timings_ms=timings, recent_place=recent,
+                      recent_place_lrp=recent_lrp, acquisition=decision,
+                      backgrounds=background, switched_from=switched_from,
+                      closed_transition=closed)
+        tracker = self.tracker
+        if tracker is None or tracker.estimate is None:
+            reason = "the map has no places yet" if self.places == 0 else (
+                f"no pose set in the map's {self.places} places (cmd/set_pose); global "
+                "relocalisation is not built yet")
+            if not odometry_ok:
+                reason += "; no odometry at this frame (base silent): motion unknown"
+            state: BeliefState = "uninitialised"
+            return Belief(state=state, reason=reason, **common)  # type: ignore[arg-type]
+        est = tracker.estimate
+        confidence = 1.0 if local is None else local.confidence
+        reason = f"tracking in place {tracker.place.id}"
+        if not odometry_ok:
+            reason += "; no odometry at this frame (base silent): motion unknown"
+        return Belief(state="tracking", reason=reason, place_id=tracker.place.id,
+                      place_label=tracker.place.label, pose_in_place=est.pose,
+                      covariance=tuple(float(v) for v in est.covariance.ravel()),
+                      confidence=confidence, particles=len(tracker.filter.particles),
+                      **common)  # type: ignore[arg-type]
+
+    def _acquire(self, prepare: Callable[[], PreparedPanorama], odo: Odometry | None
+                 ) -> tuple[
             int | None, float | None, AcquisitionDecision | None, tuple[tuple[int, float], ...]]:
         """The watched place's LRP in this frame, whether to learn a new place, and a
         background LRP measured as the robot left a place behind."""
@@ -119,7 +289,7 @@ class Localiser:
             self.acquisition.reset(self._watched[0], self._expected_background())
         if self._watched is None and not self._meters:
             return None, None, None, ()
-        prepared = PreparedPanorama.of(to_grey(self.panorama))
+        prepared = prepare()
         background = self._measure_backgrounds(prepared, odo)
         if self._watched is None:
             return None, None, None, background
@@ -136,7 +306,7 @@ class Localiser:
         # likely place, §7.1): watch that one instead of learning.
         known = self._most_likely(prepared, exclude=place_id)
         if known is not None:
-            self._watched = (known, self._known[known][0])
+            self._watched = (known, self._known[known].templates)
             self.acquisition.reset(known, self._expected_background())
             return place_id, lrp, None, background
         self._watched = None  # until the new place is learned and watched
@@ -145,7 +315,7 @@ class Localiser:
 
     def _expected_background(self) -> float | None:
         """The median background LRP of the places measured so far (None: none yet)."""
-        measured = sorted(b for _, b in self._known.values() if b is not None)
+        measured = sorted(k.background for k in self._known.values() if k.background is not None)
         return measured[len(measured) // 2] if measured else None
 
     def _measure_backgrounds(self, prepared: PreparedPanorama, odo: Odometry | None
@@ -156,10 +326,12 @@ class Localiser:
             if known is None:
                 self._meters.remove(meter)
                 continue
-            value = meter.observe(self.matcher.lrp(prepared, known[0]), odo)
+            value = meter.observe(self.matcher.lrp(prepared, known.templates), odo)
             if value is not None:
                 self._meters.remove(meter)
-                self._known = {**self._known, meter.place_id: (known[0], value)}
+                with self._lock:
+                    self._known = {**self._known, meter.place_id: KnownPlace(
+                        known.place, known.templates, value)}
                 done.append((meter.place_id, value))
         return tuple(done)
 
@@ -169,11 +341,11 @@ class Localiser:
         assert self.acquisition is not None
         s = self.acquisition.settings
         best, best_id = s.recognition_margin, None
-        for pid, (templates, background) in self._known.items():
+        for pid, known in self._known.items():
             if pid == exclude:
                 continue
-            lead = self.matcher.lrp(prepared, templates) - (
-                s.lrp_background if background is None else background)
+            lead = self.matcher.lrp(prepared, known.templates) - (
+                s.lrp_background if known.background is None else known.background)
             if lead >= best:
                 best, best_id = lead, pid
         return best_id

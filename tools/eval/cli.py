@@ -26,6 +26,8 @@ EXPERIMENTS: dict[str, tuple[str, str, str]] = {
         "tools.eval.recognition_range", "open-room", "area where a place's LRP stays up (§3.4)"
     ),
     "robustness": ("tools.eval.robustness", "office", "LRP under light changes and occlusion"),
+    "tbl-local": ("tools.eval.tbl_local", "office", "local positioning along the TBL path "
+                  "(design §7, thesis §8.1.5)"),
     "mapping": ("tools.eval.mapping", "open-room", "places learned on the robot's own along "
                 "a tour, and how well they cover it (design §6)"),
 }

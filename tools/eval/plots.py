@@ -76,8 +76,69 @@ def grid(path: Path, values: np.ndarray, marked: np.ndarray, *, title: str, lo: 
     _write(path, img)
 
 
+PALETTE = ((180, 70, 20), (40, 160, 40), (30, 30, 200), (140, 60, 160), (0, 150, 200),
+           (0, 0, 0), (120, 120, 0))
+
+
+def paths(path: Path, tracks: dict[str, np.ndarray], *, title: str,
+          points: dict[str, np.ndarray] | None = None) -> None:
+    """Paths ``(K, 2)`` (x, y in metres) on equal axes, one colour each, with a legend;
+    ``points``: sets of ``(K, 2)`` drawn as dots (e.g. particles at chosen frames)."""
+    img = _canvas(title)
+    every = [t for t in tracks.values() if len(t)] + [p for p in (points or {}).values()
+                                                       if len(p)]
+    allxy = np.concatenate(every) if every else np.zeros((1, 2))
+    lo, hi = allxy.min(axis=0), allxy.max(axis=0)
+    span = float(max(hi[0] - lo[0], hi[1] - lo[1], 0.1)) * 1.1
+    centre = (lo + hi) / 2
+    scale = (SIZE - 2 * PAD) / span
+
+    def px(x: float, y: float) -> tuple[int, int]:
+        return (int(SIZE / 2 + (x - centre[0]) * scale), int(SIZE / 2 - (y - centre[1]) * scale))
+
+    for k, (name, t) in enumerate((points or {}).items()):
+        colour = PALETTE[(k + len(tracks)) % len(PALETTE)]
+        for x, y in t:
+            cv2.circle(img, px(x, y), 1, colour, -1)
+        cv2.putText(img, name, (PAD, 50 + 16 * (k + len(tracks))), FONT, 0.4, colour, 1)
+    for k, (name, t) in enumerate(tracks.items()):
+        colour = PALETTE[k % len(PALETTE)]
+        pts = np.array([px(x, y) for x, y in t], np.int32).reshape(-1, 1, 2)
+        cv2.polylines(img, [pts], False, colour, 1, cv2.LINE_AA)
+        cv2.putText(img, name, (PAD, 50 + 16 * k), FONT, 0.4, colour, 1, cv2.LINE_AA)
+    cv2.putText(img, f"{span:.2f} m across", (PAD, SIZE - 20), FONT, 0.4, INK, 1, cv2.LINE_AA)
+    _write(path, img)
+
+
+def series(path: Path, values: dict[str, np.ndarray], *, title: str, x_label: str,
+           y_label: str) -> None:
+    """Curves over their index (e.g. error per frame), 0 at the bottom."""
+    img = _canvas(title)
+    n = max((len(v) for v in values.values()), default=1)
+    top = max((float(np.nanmax(v)) for v in values.values() if len(v)), default=1.0) * 1.1
+    top = top if top > 0 else 1.0
+    span = SIZE - 2 * PAD
+
+    def px(i: float, v: float) -> tuple[int, int]:
+        return int(PAD + i / max(n - 1, 1) * span), int(SIZE - PAD - v / top * span)
+
+    step = _tick_step(top)
+    for t in np.arange(0.0, top + 1e-12, step):
+        cv2.line(img, px(0, t), px(n - 1, t), GRID, 1)
+        cv2.putText(img, f"{t:g}", (8, px(0, t)[1] + 4), FONT, 0.4, INK, 1)
+    cv2.rectangle(img, px(0, top), px(n - 1, 0), INK, 1)
+    for k, (name, v) in enumerate(values.items()):
+        colour = PALETTE[k % len(PALETTE)]
+        pts = np.array([px(i, float(x)) for i, x in enumerate(v)], np.int32).reshape(-1, 1, 2)
+        cv2.polylines(img, [pts], False, colour, 1, cv2.LINE_AA)
+        cv2.putText(img, name, (PAD + 5, PAD + 16 * (k + 1)), FONT, 0.4, colour, 1)
+    cv2.putText(img, x_label, (SIZE // 2 - 30, SIZE - 15), FONT, 0.5, INK, 1, cv2.LINE_AA)
+    cv2.putText(img, y_label, (8, PAD - 8), FONT, 0.5, INK, 1, cv2.LINE_AA)
+    _write(path, img)
+
+
 def _tick_step(limit: float) -> float:
-    for step in (0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0):
+    for step in (0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0):
         if limit / step <= 8:
             return step
     return limit / 8

@@ -1,0 +1,44 @@
+"""What the localiser believes after a frame (published as ``pose`` and ``belief``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+from daemon.mapping.acquisition import AcquisitionDecision
+from daemon.mapping.transition import Transition
+
+BeliefState = Literal["uninitialised", "tracking", "lost", "relocalising"]
+
+
+@dataclass(frozen=True)
+class PlaceScore:
+    """One place's recognition in a frame: its LRP and how far that stands above its
+    background LRP (§9.2)."""
+
+    place_id: int
+    lrp: float
+    lead: float
+
+
+@dataclass(frozen=True)
+class Belief:
+    stamp_ns: int
+    state: BeliefState
+    reason: str
+    odometry_ok: bool
+    place_id: int | None = None
+    place_label: str = ""
+    pose_in_place: tuple[float, float, float] | None = None  # (x, y, θ) in the place frame
+    covariance: tuple[float, ...] | None = None  # 3 x 3 of (x, y, θ), row-major
+    confidence: float = 0.0  # raw sensor-model output at the estimate, [0, 1]
+    particles: int = 0
+    motion_since_last: tuple[float, float, float] | None = None
+    scores: tuple[PlaceScore, ...] = ()  # places recognised in this frame (not every frame)
+    switched_from: int | None = None  # the estimate moved into place_id from this place
+    closed_transition: Transition | None = None  # a cycle closed in this frame (§7.1.3)
+    timings_ms: dict[str, float] = field(default_factory=dict)
+    recent_place: int | None = None  # the place autonomous acquisition watches...
+    recent_place_lrp: float | None = None  # ...its LRP in this frame
+    acquisition: AcquisitionDecision | None = None  # learn a new place here (design §6)
+    backgrounds: tuple[tuple[int, float], ...] = ()  # (place, background LRP) measured now

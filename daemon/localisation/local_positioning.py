@@ -1,0 +1,158 @@
+"""Local positioning within one place (design §7, thesis §8.1): track the place's landmarks
+in the current panorama and update the particle filter with them.
+
+Per frame: resample → predict with the odometry since the last frame → track each landmark
+in a window around where the current estimate expects it (wider as the estimate is less
+sure) → weigh the particles with the sensor model → estimate (dominant mode, covariance)
+and confidence (the raw sensor-model output at the estimate).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from daemon.localisation.particle_filter import Estimate, ParticleFilter
+from daemon.localisation.sensor_models import (
+    LandmarkGeometry,
+    SensorModel,
+    combine,
+    ncc_weights,
+    raw_output,
+)
+from daemon.localisation.settings import LocalisationSettings
+from daemon.mapping.place import Place
+from daemon.vision.landmarks import TEMPLATE
+from daemon.vision.tracking import Track, column_to_bearing_of_centre, predict_column, track
+from kernel.angles import wrap_angle
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What the place's landmarks showed in one frame."""
+
+    bearings: np.ndarray  # (M,) robot frame
+    ncc: np.ndarray  # (M,)
+    weights: np.ndarray  # (M,) NCC weights of the sensor model
+
+
+@dataclass(frozen=True)
+class LocalResult:
+    estimate: Estimate
+    confidence: float  # raw sensor-model output at the estimate, [0, 1]
+    observation: Observation
+    tracked_ncc_mean: float
+
+
+def initial_orientation(bearings: np.ndarray, reference: np.ndarray, ncc: np.ndarray,
+                        min_ncc: float, tolerance: float = math.radians(5.0)
+                        ) -> float | None:
+    """θ₀ from the landmarks matching at least ``min_ncc`` (eq. 8.34: the mean of reference
+    minus current bearing, γ_i − φ_i). Made robust: the mean of the differences within
+    ``tolerance`` of the one most others agree with; None with fewer than three."""
+    good = ncc >= min_ncc
+    if good.sum() < 3:
+        return None
+    diff = np.asarray(wrap_angle(reference[good] - bearings[good]))
+    apart = np.abs(np.asarray(wrap_angle(diff[:, None] - diff[None, :])))
+    support = (apart <= tolerance).sum(axis=1)
+    best = int(np.argmax(support))
+    if support[best] < 3:
+        return None
+    inliers = diff[apart[best] <= tolerance]
+    return float(math.atan2(np.sin(inliers).mean(), np.cos(inliers).mean()))
+
+
+class PlaceTracker:
+    """The particle filter in one place's frame, fed by tracking its landmarks."""
+
+    def __init__(self, place: Place, settings: LocalisationSettings, model: SensorModel,
+                 rng: np.random.Generator) -> None:
+        self.place = place
+        self.settings = settings
+        self.model = model
+        self.geometry = LandmarkGeometry.of(place.landmarks, settings.far_depth_m)
+        self.templates = place.landmarks.templates()
+        self.rows = place.landmarks.rows().astype(float)
+        self.width = place.landmarks.width
+        self.margin = place.landmarks.margin
+        self.filter = ParticleFilter(settings, rng)
+        self.estimate: Estimate | None = None
+
+    def start(self, grey: np.ndarray, pose: tuple[float, float, float], sigma_xy: float,
+              sigma_yaw: float) -> None:
+        """Particles around ``pose``. When the orientation is barely known (σ_θ > 0.2 rad),
+        it is first taken from the landmarks' bearings (§8.1.5, eq. 8.34), searched over
+        the whole panorama."""
+        if sigma_yaw > 0.2:
+            found = self._track(grey, pose, radius=self.width // 2 - TEMPLATE)
+            bearings = column_to_bearing_of_centre(found.cols, self.width)
+            theta0 = initial_orientation(bearings, self.geometry.bearing, found.scores,
+                                         self.settings.orientation_ncc)
+            if theta0 is not None:
+                pose, sigma_yaw = (pose[0], pose[1], theta0), math.radians(3.0)
+        self.filter.initialise(pose, sigma_xy, sigma_yaw)
+        self.estimate = Estimate(pose, np.diag([sigma_xy**2, sigma_xy**2, sigma_yaw**2]), 1.0)
+
+    def update(self, grey: np.ndarray, motion: tuple[float, float, float] | None,
+               dt_s: float) -> LocalResult:
+        """One frame: ``grey`` the panorama (with wrap margin), ``motion`` the odometry
+        increment since the last frame (None: unknown, the particles only spread)."""
+        assert self.estimate is not None, "start() first"
+        f = self.filter
+        f.resample()  # §8.1.3 step 1
+        if motion is None:  # no odometry: motion unknown, spread as for a fast step
+            f.predict((0.0, 0.0, 0.0), dt_s)
+            f.particles[:, :2] += f.rng.normal(0.0, 0.05, (len(f.particles), 2))
+        else:
+            f.predict(motion, dt_s)  # step 2
+        predicted = self._predicted_pose(motion)
+        sigma = self.estimate.covariance
+        spread = 3.0 * (math.sqrt(max(sigma[2, 2], 0.0))
+                        + math.sqrt(max(sigma[0, 0] + sigma[1, 1], 0.0)) / 1.0)
+        radius = self.settings.search_cols + int(math.ceil(spread * self.width
+                                                           / (2 * math.pi)))
+        found = self._track(grey, predicted, min(radius, self.width // 2 - TEMPLATE))
+        bearings = column_to_bearing_of_centre(found.cols, self.width)
+        # Rows follow the landmarks (their elevation changes with distance) while tracked.
+        self.rows = np.where(found.scores >= self.settings.min_ncc, found.rows, self.rows)
+        weights = ncc_weights(found.scores, self.settings.min_ncc)
+        sigma_bearing = math.radians(self.settings.bearing_sigma_deg) * (
+            1.0 + 10.0 * (1.0 - np.clip(found.scores, 0.0, 1.0)))
+        likelihood = self.model(f.particles, bearings, sigma_bearing, self.geometry)  # step 3
+        f.weigh(combine(likelihood, weights, self.settings.outlier_floor))
+        self.estimate = f.estimate()
+        at_estimate = self.model(np.array([self.estimate.pose]), bearings, sigma_bearing,
+                                 self.geometry)[0]
+        return LocalResult(self.estimate, raw_output(at_estimate, weights),
+                           Observation(bearings, found.scores, weights),
+                           float(np.mean(found.scores)))
+
+    def move_to(self, pose: tuple[float, float, float], covariance: np.ndarray) -> None:
+        """Redistribute the particles around ``pose`` (a pose passed in from another
+        place through a transition, §8.2)."""
+        sigma_xy = float(np.clip(math.sqrt(max(covariance[0, 0] + covariance[1, 1], 0.0) / 2),
+                                 0.03, 0.5))
+        sigma_yaw = float(np.clip(math.sqrt(max(covariance[2, 2], 0.0)), 0.02, 0.3))
+        self.filter.initialise(pose, sigma_xy, sigma_yaw)
+        self.estimate = Estimate(pose, np.diag([sigma_xy**2, sigma_xy**2, sigma_yaw**2]), 1.0)
+
+    def _predicted_pose(self, motion: tuple[float, float, float] | None
+                        ) -> tuple[float, float, float]:
+        assert self.estimate is not None
+        x, y, th = self.estimate.pose
+        if motion is None:
+            return x, y, th
+        dx, dy, dth = motion
+        c, s = math.cos(th), math.sin(th)
+        return x + c * dx - s * dy, y + s * dx + c * dy, float(wrap_angle(th + dth))
+
+    def _track(self, grey: np.ndarray, pose: tuple[float, float, float], radius: int
+               ) -> Track:
+        g = self.geometry
+        cols = np.array([predict_column(float(b), float(min(d, 50.0)), pose, self.width)
+                         for b, d in zip(g.bearing, g.depth, strict=True)])
+        return track(grey, self.margin, self.templates, cols, self.rows, radius,
+                     self.settings.search_rows)

@@ -1,0 +1,96 @@
+"""Which place to position in (design §8, §6 cycles; thesis §8.2, §7.1.3).
+
+Every few frames the current place, its neighbours (by transition) and, in turn, a few
+other places are recognised (LRP minus background). A neighbour that leads the current
+place by ``switch_margin`` takes over: the estimate passes through the transition. A place
+with no transition from here must lead by ``cycle_margin`` on ``cycle_checks`` checks in a
+row; the estimate then restarts in it, and once it is reliable the cycle's transition is
+measured (:class:`CycleClosure`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+from daemon.localisation.belief import PlaceScore
+from daemon.localisation.settings import LocalisationSettings
+from daemon.mapping.odometry_chain import OdometryChain
+from daemon.mapping.transition import Transition
+from kernel.se2 import UncertainSE2
+
+
+@dataclass(frozen=True)
+class Switch:
+    kind: Literal["neighbour", "cycle"]
+    place_id: int
+
+
+class PlaceSwitcher:
+    def __init__(self, settings: LocalisationSettings) -> None:
+        self.settings = settings
+        self._turn = 0  # where the rotation through the other places stands
+        self._streak: tuple[int, int] | None = None  # (place, checks in a row)
+
+    def to_check(self, current: int, neighbours: list[int], known: list[int]) -> list[int]:
+        """The places to recognise now: the current one, its neighbours, and the next
+        ``others_per_check`` of the rest in turn (none is left out for good)."""
+        others = [p for p in known if p != current and p not in neighbours]
+        k = min(self.settings.others_per_check, len(others))
+        chosen = [others[(self._turn + i) % len(others)] for i in range(k)] if others else []
+        self._turn = (self._turn + k) % max(len(others), 1)
+        if self._streak is not None and self._streak[0] in others \
+                and self._streak[0] not in chosen:
+            chosen.append(self._streak[0])  # a place on a streak is checked every time
+        return [current, *neighbours, *chosen]
+
+    def decide(self, current: int, neighbours: list[int], scores: list[PlaceScore]
+               ) -> Switch | None:
+        s = self.settings
+        lead = {sc.place_id: sc.lead for sc in scores}
+        here = lead.get(current, -1.0)
+        best_nb = max((p for p in neighbours if p in lead), key=lambda p: lead[p], default=None)
+        if best_nb is not None and lead[best_nb] >= here + s.switch_margin:
+            self._streak = None
+            return Switch("neighbour", best_nb)  # §8.2: the neighbour's LRP rose above
+        ceiling = max(here, lead[best_nb] if best_nb is not None else -1.0)
+        others = [sc for sc in scores if sc.place_id != current and sc.place_id not in neighbours]
+        best = max(others, key=lambda sc: sc.lead, default=None)
+        if best is None or best.lead < ceiling + s.cycle_margin:
+            if best is not None and self._streak is not None \
+                    and self._streak[0] == best.place_id:
+                self._streak = None
+            return None
+        count = self._streak[1] + 1 if self._streak and self._streak[0] == best.place_id else 1
+        self._streak = (best.place_id, count)
+        if count >= s.cycle_checks:
+            self._streak = None
+            return Switch("cycle", best.place_id)
+        return None
+
+
+class CycleClosure:
+    """A cycle being closed (§7.1.3, design §6): the robot left place ``from_id`` for place
+    ``to_id``, which has no transition from it. T_from_to = (estimate in from) ∘ (odometry
+    since) ∘ (estimate in to)⁻¹, taken once the estimate in ``to`` is reliable."""
+
+    def __init__(self, from_id: int, to_id: int, T_from_robot: UncertainSE2,
+                 odometry: OdometryChain, settings: LocalisationSettings) -> None:
+        self.from_id, self.to_id = from_id, to_id
+        self.T_from_robot = T_from_robot
+        self.odometry = odometry
+        self.settings = settings
+        self.reliable_frames = 0
+
+    def observe(self, T_to_robot: UncertainSE2, confidence: float) -> Transition | None:
+        """The estimate in ``to`` this frame; the transition once it has been reliable
+        for ``reliable_frames`` frames in a row."""
+        s = self.settings
+        cov = T_to_robot.covariance
+        reliable = confidence >= s.reliable_confidence and \
+            (cov[0, 0] + cov[1, 1]) / 2 <= s.reliable_sigma_m**2
+        self.reliable_frames = self.reliable_frames + 1 if reliable else 0
+        if self.reliable_frames < s.reliable_frames or self.odometry.broken:
+            return None
+        T = self.T_from_robot.compose(self.odometry.relative()).compose(T_to_robot.inverse())
+        return Transition(self.from_id, self.to_id, T, "cycle")

@@ -1,0 +1,79 @@
+"""Settings of local positioning (``[localisation]``, design §7-8, thesis §8.1-8.2)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+from kernel.settings import setting
+
+SensorModelName = Literal["assumed", "estimated", "ellipsoid"]
+
+
+@dataclass(frozen=True)
+class LocalisationSettings:
+    seed: int = setting(0, ge=0, doc="seed of the particle filter's random generator (a "
+                        "replay through the daemon gives the same poses)")
+    particles: int = setting(2000, ge=50, le=100_000, doc="particles (thesis: 2000)")
+    sensor_model: SensorModelName = setting(
+        "ellipsoid", doc="assumed | estimated | ellipsoid (§8.1.4; the third is the default)")
+    initial_sigma_xy_m: float = setting(0.1, gt=0.0, le=5.0,
+                                        doc="set_pose without sigma_xy: the spread around it")
+    initial_sigma_yaw_rad: float = setting(0.1, gt=0.0, le=3.2,
+                                           doc="set_pose without sigma_yaw")
+    orientation_ncc: float = setting(0.85, ge=0.0, le=1.0, doc="landmarks matching at least "
+                                     "this well set the initial orientation (§8.1.5, eq. 8.34)")
+    translation_noise: float = setting(0.05, ge=0.0, le=1.0,
+                                       doc="motion model: translation std per metre moved")
+    rotation_noise: float = setting(0.05, ge=0.0, le=1.0,
+                                    doc="motion model: rotation std per radian turned")
+    heading_noise_per_m: float = setting(0.02, ge=0.0, le=1.0,
+                                         doc="motion model: rotation std per metre moved")
+    delay_sigma_s: float = setting(0.02, ge=0.0, le=1.0, doc="camera-odometry sensing delay "
+                                   "std: the velocity times this is added as noise (§8.1.5)")
+    diffusion_xy_m: float = setting(0.002, ge=0.0, le=0.5,
+                                    doc="per-frame std added to every particle (x, y)")
+    diffusion_yaw_rad: float = setting(0.002, ge=0.0, le=0.5,
+                                       doc="per-frame std added to every particle (yaw)")
+    bearing_sigma_deg: float = setting(2.0, gt=0.0, le=20.0, doc="std of a tracked bearing "
+                                       "at NCC 1 (the current observation)")
+    assumed_depth_m: float = setting(2.5, gt=0.0, le=50.0,
+                                     doc="assumed-depth model: every landmark this far")
+    assumed_depth_sigma_m: float = setting(1.5, gt=0.0, le=50.0,
+                                           doc="assumed-depth model: its std")
+    far_depth_m: float = setting(30.0, gt=1.0, le=1000.0, doc="a landmark without a finite "
+                                 "depth estimate stands this far, as far uncertain")
+    gate_sigma: float = setting(3.0, gt=0.0, le=20.0, doc="ellipsoid model: the ellipse "
+                                "holds this many standard deviations; a ray missing it "
+                                "scores 0 (eq. 8.33)")
+    outlier_floor: float = setting(0.02, gt=0.0, lt=1.0, doc="robust combination: each "
+                                   "landmark's likelihood is floor + (1 - floor) p, so one "
+                                   "mis-associated landmark cannot veto a particle")
+    min_ncc: float = setting(0.6, ge=-1.0, lt=1.0, doc="a tracked landmark weighs "
+                             "(NCC - min_ncc) / (1 - min_ncc); below it, nothing (eq. 8.10)")
+    search_cols: int = setting(12, ge=2, le=180, doc="tracking window half-width (columns) "
+                               "beyond the estimate's own uncertainty")
+    search_rows: int = setting(6, ge=1, le=32, doc="tracking window half-height (rows)")
+    recognise_every: int = setting(5, ge=1, le=1000, doc="recognise the current place's "
+                                   "neighbours every n-th frame (§8.2)")
+    switch_margin: float = setting(0.02, ge=0.0, le=1.0, doc="a neighbour takes over when "
+                                   "its LRP minus background leads the current place's by "
+                                   "this (§8.2)")
+    others_per_check: int = setting(4, ge=0, le=1000, doc="places beyond the neighbours "
+                                    "tried per recognition, in turn (a place with no "
+                                    "transition from here closes a cycle, §7.1.3)")
+    cycle_margin: float = setting(0.08, ge=0.0, le=1.0, doc="a place with no transition "
+                                  "from here must lead by this, on cycle_checks checks "
+                                  "in a row, to be switched to")
+    cycle_checks: int = setting(3, ge=1, le=100, doc="see cycle_margin")
+    reliable_sigma_m: float = setting(0.05, gt=0.0, le=5.0, doc="an estimate is reliable "
+                                      "when its xy std is below this...")
+    reliable_confidence: float = setting(0.5, ge=0.0, le=1.0,
+                                         doc="...and its confidence above this")
+    reliable_frames: int = setting(10, ge=1, le=1000, doc="...for this many frames in a row "
+                                   "(then a cycle's transition is measured, §7.1.3)")
+    recovery_sigma_m: float = setting(1.0, gt=0.0, le=10.0, doc="a place taken over without "
+                                      "a transition: particles over this std around its "
+                                      "reference (§9.3.2)")
+    background_lrp: float = setting(0.7, ge=0.0, le=1.0,
+                                    doc="a place's background LRP until it is measured")

@@ -1,0 +1,152 @@
+"""The simulated robot in lock-step, driving the daemon's own pipeline (design §10).
+
+:class:`Run` opens the HAL sim camera and base of one configuration, feeds every frame and
+every odometry sample to one :class:`~daemon.localisation.localiser.Localiser` (the
+object the daemon runs), learns places with the daemon's Turn Back and Look loop and
+:class:`~daemon.service.mapper.Mapper` (a real map file), and reads ground truth through
+the simulator's truth interface (``true_pose``) for the evaluator only.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from daemon.config import PlacecellConfig, load
+from daemon.localisation.belief import Belief
+from daemon.localisation.localiser import Localiser
+from daemon.localisation.settings import LocalisationSettings
+from daemon.mapping.place import Place
+from daemon.mapping.tbl import cross_legs
+from daemon.service.learning import DeviceSensors, drive_tbl
+from daemon.service.mapper import Link, Mapper
+from daemon.store.sqlite_store import MapStore
+from hal.registry import HalContext, create_base, create_camera
+from hal.sim.factory import build_sim_robot
+from hal.sim.robot import SimRobot
+from hal.sim.scenario import Scenario
+from kernel.panorama import geometry_checksum
+from kernel.se2 import SE2
+from kernel.types import Frame
+
+# An evaluator's change to a raw frame before the localiser sees it (occlusion).
+FrameFilter = Callable[[np.ndarray], np.ndarray]
+
+
+def lockstep_config(seed: int, scenario: str = "", world: str = "",
+                    start_pose: tuple[float, float, float] | None = None,
+                    localisation: LocalisationSettings | None = None) -> PlacecellConfig:
+    base = load(None)
+    sim = dataclasses.replace(base.sim, realtime=False, seed=seed, scenario=scenario)
+    if world:
+        sim = dataclasses.replace(sim, world=world)
+    if start_pose is not None:
+        sim = dataclasses.replace(sim, start_pose=list(start_pose))
+    return dataclasses.replace(base, sim=sim, localisation=localisation or base.localisation)
+
+
+class Run:
+    """One lock-step run; use as a context manager."""
+
+    def __init__(self, cfg: PlacecellConfig, scenario: Scenario | None = None,
+                 frame_filter: FrameFilter | None = None) -> None:
+        self.cfg = cfg
+        self.ctx = HalContext(cfg)
+        self.robot: SimRobot = self.ctx.shared("sim.robot",
+                                               lambda: build_sim_robot(cfg, scenario))
+        self.camera, self.base = create_camera(cfg.camera, self.ctx), create_base(cfg.base,
+                                                                                 self.ctx)
+        self.localiser = Localiser(cfg.mirror, cfg.panorama, settings=cfg.localisation,
+                                   odometry_noise=cfg.odometry)
+        self._tmp = tempfile.TemporaryDirectory()
+        self.store = MapStore.open(Path(self._tmp.name) / "map.db",
+                                   geometry_checksum(cfg.mirror, cfg.panorama))
+        self.mapper = Mapper(self.store, cfg.odometry)
+        self.sensors = DeviceSensors(self.camera, self.base, cfg.tbl, on_odometry=self._odometry)
+        self.frame_filter = frame_filter
+        self.references: dict[int, SE2] = {}  # true reference pose of each place (truth)
+        self.process_s: list[float] = []
+
+    def __enter__(self) -> Run:
+        self.camera.open()
+        self.base.open()
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.camera.close()
+        self.base.close()
+        self.store.close()
+        self._tmp.cleanup()
+
+    def _odometry(self, samples: list[Any]) -> None:
+        self.localiser.add_odometry(samples)
+        self.mapper.on_odometry(samples)
+
+    # ------------------------------------------------------------------ driving
+    def step(self) -> tuple[Frame, Belief]:
+        """The next frame through the localiser."""
+        frame, _ = self.sensors.frame()
+        if self.frame_filter is not None:
+            frame = dataclasses.replace(frame, image=self.frame_filter(frame.image))
+        t0 = time.perf_counter()
+        belief = self.localiser.process_frame(frame)
+        self.process_s.append(time.perf_counter() - t0)
+        return frame, belief
+
+    def drive(self, dx: float, dy: float, dyaw: float, speed: float) -> Iterator[Belief]:
+        """Command one relative move and process every frame until it is done."""
+        self.base.move_relative(dx, dy, dyaw, speed)
+        frames, limit = 0, int(60 * self.sensors.rate_hz)
+        while True:
+            _, belief = self.step()
+            yield belief
+            frames += 1
+            status = self.base.status()
+            if (status.move_done and not status.moving and frames > 1) or frames > limit:
+                return
+
+    def drive_cross(self, extent: float, speed: float) -> Iterator[Belief]:
+        """The Turn Back and Look cross (§4.3) from here, heading kept."""
+        for _, dx, dy in cross_legs(extent):
+            yield from self.drive(dx, dy, 0.0, speed)
+
+    def learn(self, label: str = "") -> Place:
+        """Turn Back and Look here with the daemon's loop; the place is stored with its
+        transition from the place learned before and handed to the localiser."""
+        link: list[Link | None] = []
+        truth: list[tuple[float, float, float]] = []
+
+        def start(odo: Any) -> None:  # at rest at the reference pose
+            link.append(self.mapper.begin_place(odo))
+            truth.append(self.robot.true_pose())
+
+        tbl = drive_tbl(self.sensors, self.base, self.localiser.unwarper, self.cfg.tbl,
+                        on_start=start)
+        stored, added = self.mapper.add_place(
+            Place(tbl.result(), tbl.reference_panorama, label=label), link[0])
+        place = dataclasses.replace(stored, reference_panorama=None)
+        self.localiser.know_place(place)
+        for t in added[::2]:
+            self.localiser.know_transition(t)
+        self.references[place.id] = SE2.of(truth[0])
+        return place
+
+    # ------------------------------------------------------------------ truth
+    def truth_in(self, place_id: int) -> SE2:
+        """The robot's true pose in place ``place_id``'s frame (evaluator only)."""
+        return self.references[place_id].between(SE2.of(self.robot.true_pose()))
+
+    def error_m(self, belief: Belief) -> float | None:
+        """Distance between the belief's pose and the truth in the same place."""
+        if belief.pose_in_place is None or belief.place_id is None:
+            return None
+        truth = self.truth_in(belief.place_id)
+        x, y, _ = belief.pose_in_place
+        return math.hypot(x - truth.x, y - truth.y)
