@@ -157,7 +157,10 @@ def _transition_error(port: int, truth: Truth, dock: dict[str, Any], door: dict[
     return measured, true, forward["covariance"]
 
 
-def test_learn_two_places_without_drift_transition_matches_truth(tmp_path: Path) -> None:
+def test_learn_two_places_then_track_from_one_to_the_other(tmp_path: Path) -> None:
+    """Design §6-8: two places learned without drift give a transition matching the truth;
+    then a restarted daemon, told it stands at the first place, tracks the robot driven
+    (with the default odometry drift) to the second, as a separate subscriber sees it."""
     config, port, truth = _start(tmp_path, NO_DRIFT)
     with running_daemon(config):
         _wait_ready(config)
@@ -168,6 +171,67 @@ def test_learn_two_places_without_drift_transition_matches_truth(tmp_path: Path)
         assert abs(math.degrees(math.remainder(measured.yaw - true.yaw, 2 * math.pi))) <= 0.5
         places = _ctl(config, "places", "--json")
         assert [p["label"] for p in json.loads(places.stdout)["places"]] == ["dock", "door"]
+    references = {dock["place"]["id"]: truth.at(dock["place"]["reference_stamp_ns"]),
+                  door["place"]["id"]: truth.at(door["place"]["reference_stamp_ns"])}
+    _track_dock_to_door(tmp_path, references, dock["place"]["id"], door["place"]["id"])
+
+
+def _track_dock_to_door(tmp: Path, references: dict[int, SE2], dock: int, door: int) -> None:
+    truth = Truth(tmp / "truth-tracking.jsonl")
+    scenario = tmp / "dock-to-door.toml"
+    start = references[dock]
+    # The robot starts at the dock's reference and waits 20 s (the daemon starts, the
+    # operator sets the pose), then drives to the door's with the default drift.
+    goal = references[door]
+    scenario.write_text(
+        f'name = "dock-to-door"\nworld = "generate:office:1"\n'
+        f"start_pose = [{start.x}, {start.y}, {start.yaw}]\n[trajectory]\n"
+        f'kind = "waypoints"\nspeed = 0.3\nstart_after_s = 20.0\n'
+        f"waypoints = [[{goal.x}, {goal.y}]]\n")
+    config, _ = write_config(tmp, {"robot": {"name": "e2e"}, "sim": {
+        "scenario": str(scenario), "truth_out": str(truth.path)}})
+    with running_daemon(config):
+        _wait_ready(config)
+        before = _ctl(config, "pose", "--json", timeout=30)
+        assert before.returncode == 0, before.stderr
+        assert _lines(before.stdout)[-1]["state"] == "uninitialised"
+        set_pose = _ctl(config, "set-pose", "0", "0", "0", "--place", str(dock),
+                        "--sigma-xy", "0.05", "--json")
+        assert set_pose.returncode == 0, set_pose.stderr
+        set_at = time.monotonic_ns()
+        samples = truth.samples()
+        assert max(math.dist(samples[0][1:3], p[1:3]) for p in samples) < 1e-4, \
+            "the robot moved before the pose was set: raise start_after_s"
+        pose_file = tmp / "poses.jsonl"  # a file, not a pipe: a full pipe would block it
+        with pose_file.open("w") as sink:
+            follower = subprocess.Popen(
+                [venv_bin("placecellctl"), "--config", str(config), "pose", "--follow",
+                 "--json"], cwd=REPO, stdout=sink, stderr=subprocess.STDOUT, text=True)
+        try:
+            arrived = wait_for(lambda: len(truth.samples()) > 0 and math.dist(
+                truth.samples()[-1][1:3], (goal.x, goal.y)) < 0.05
+                and truth.stopped_since(set_at, 2.0), 120, 0.5)
+            assert arrived, "the robot never reached the door"
+        finally:
+            follower.terminate()
+            follower.wait(timeout=30)
+        poses = _lines(pose_file.read_text())
+    samples = truth.samples()
+    moving = [t for t, *_ in samples if math.dist(_[0:2], samples[0][1:3]) > 1e-3]
+    t0, t1 = moving[0], moving[-1]
+    during = [p for p in poses if t0 <= p["stamp_ns"] <= t1]
+    expected = (t1 - t0) / 1e9 * 10.0  # the camera's 10 Hz
+    assert len(during) >= 0.9 * expected, (len(during), expected)
+    assert all(p["state"] == "tracking" for p in during), {p["state"] for p in during}
+    ids = [p["place"]["id"] for p in poses if p["stamp_ns"] >= t0]
+    assert ids[0] == dock and ids[-1] == door, (ids[0], ids[-1])
+    errors = []
+    for p in poses:
+        if p["stamp_ns"] < t0 or p["state"] != "tracking":
+            continue
+        true_in_place = references[p["place"]["id"]].between(truth.at(p["stamp_ns"]))
+        errors.append(math.hypot(p["x"] - true_in_place.x, p["y"] - true_in_place.y))
+    assert max(errors) <= 0.10, (max(errors), sum(errors) / len(errors))
 
 
 def test_default_drift_inside_2_sigma_and_abort_stops_the_robot(tmp_path: Path) -> None:

@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import math
+import queue
 import sys
+import time
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -226,6 +230,72 @@ def cmd_map(args: argparse.Namespace) -> int:
         return EXIT_REFUSED
 
 
+def cmd_set_pose(args: argparse.Namespace) -> int:
+    """Tell the daemon where the robot stands in a place: it tracks from there."""
+    request: dict[str, Any] = {"place": args.place, "x": args.x, "y": args.y, "yaw": args.yaw}
+    if args.sigma_xy is not None:
+        request["sigma_xy"] = args.sigma_xy
+    if args.sigma_yaw is not None:
+        request["sigma_yaw"] = args.sigma_yaw
+    code, reply = _simple_query(args, "cmd/set_pose", json.dumps(request).encode())
+    if reply is None:
+        return code
+    if reply.get("kind") == "error":
+        return _error_exit(reply, args.json)
+    if args.json:
+        _print(reply)
+    else:
+        print(f"pose set: place {reply['place']} x {reply['x']:.3f} m, y {reply['y']:.3f} m, "
+              f"yaw {reply['yaw']:.3f} rad")
+    return EXIT_OK
+
+
+def format_pose(p: dict[str, Any]) -> str:
+    if p.get("x") is None:
+        return f"{p['state']}: {p['reason']}"
+    cov = p.get("covariance") or [0.0] * 9
+    sigma_xy = math.sqrt(max(cov[0] + cov[4], 0.0) / 2)
+    place = p["place"]
+    label = f" ({place['label']})" if place.get("label") else ""
+    return (f"{p['state']} in place {place['id']}{label}: x {p['x']:+.3f} m, "
+            f"y {p['y']:+.3f} m, yaw {math.degrees(p['yaw']):+.1f} deg, "
+            f"sigma {sigma_xy * 1000:.0f} mm, confidence {p['confidence']:.2f}")
+
+
+def cmd_pose(args: argparse.Namespace) -> int:
+    """The daemon's pose: the next one published, or every one with --follow."""
+    session, robot = open_client(args)
+    key = zenoh_link.key(robot, "pose")
+    poses: queue.Queue[dict[str, Any]] = queue.Queue()
+
+    def on_sample(sample: Any) -> None:
+        with contextlib.suppress(ValueError):  # not ours: ignored
+            poses.put(zenoh_link.decode(sample.payload.to_bytes()))
+
+    subscriber = session.declare_subscriber(key, on_sample)
+    shown = 0
+    try:
+        deadline = time.monotonic() + (args.duration if args.follow else args.timeout)
+        while time.monotonic() < deadline:
+            try:
+                pose = poses.get(timeout=min(0.2, max(deadline - time.monotonic(), 0.01)))
+            except queue.Empty:
+                continue
+            print(json.dumps(pose, separators=(",", ":")) if args.json else format_pose(pose),
+                  flush=True)
+            shown += 1
+            if not args.follow or (args.count and shown >= args.count):
+                break
+    except KeyboardInterrupt:
+        pass
+    finally:
+        subscriber.undeclare()
+        session.close()
+    if shown == 0:
+        return _unreachable(args, key)
+    return EXIT_OK
+
+
 def cmd_status(args: argparse.Namespace) -> int:
     session, robot = open_client(args)
     try:
@@ -283,6 +353,22 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("abort", help="stop the running job (the robot stops; nothing stored)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_abort)
+    p = sub.add_parser("set-pose", help="tell the daemon where the robot stands in a place")
+    p.add_argument("x", type=float, help="metres, in the place's frame")
+    p.add_argument("y", type=float)
+    p.add_argument("yaw", type=float, help="radians")
+    p.add_argument("--place", type=int, required=True, help="the place's id")
+    p.add_argument("--sigma-xy", type=float, help="how sure, metres (default: the daemon's)")
+    p.add_argument("--sigma-yaw", type=float, help="radians; above 0.2 the view decides")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_set_pose)
+    p = sub.add_parser("pose", help="the robot's pose in the current place")
+    p.add_argument("--follow", action="store_true", help="every pose as it is published")
+    p.add_argument("--count", type=int, default=0, help="with --follow: stop after this many")
+    p.add_argument("--duration", type=float, default=1e9,
+                   help="with --follow: stop after this many seconds")
+    p.add_argument("--json", action="store_true", help="one JSON object per line")
+    p.set_defaults(func=cmd_pose)
     p = sub.add_parser("places", help="the places of the daemon's map")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_places)

@@ -118,7 +118,7 @@ class PlaceTracker:
         bearings = column_to_bearing_of_centre(found.cols, self.width)
         # Rows follow the landmarks (their elevation changes with distance) while tracked.
         self.rows = np.where(found.scores >= self.settings.min_ncc, found.rows, self.rows)
-        weights = ncc_weights(found.scores, self.settings.min_ncc)
+        weights = ncc_weights(found.scores, self.settings.min_ncc) * self._scale_kept(predicted)
         sigma_bearing = math.radians(self.settings.bearing_sigma_deg) * (
             1.0 + 10.0 * (1.0 - np.clip(found.scores, 0.0, 1.0)))
         likelihood = self.model(f.particles, bearings, sigma_bearing, self.geometry)  # step 3
@@ -138,6 +138,17 @@ class PlaceTracker:
         sigma_yaw = float(np.clip(math.sqrt(max(covariance[2, 2], 0.0)), 0.02, 0.3))
         self.filter.initialise(pose, sigma_xy, sigma_yaw)
         self.estimate = Estimate(pose, np.diag([sigma_xy**2, sigma_xy**2, sigma_yaw**2]), 1.0)
+
+    def _scale_kept(self, pose: tuple[float, float, float]) -> np.ndarray:
+        """1 for landmarks that appear at most ``max_zoom`` times larger or smaller than
+        in the reference (reference depth over current distance), else 0: a fixed-size
+        template on a landmark seen at another scale slides off its point and still
+        matches well (as in Turn Back and Look, design §3.3)."""
+        g = self.geometry
+        now = np.hypot(g.mean[:, 0] - pose[0], g.mean[:, 1] - pose[1])
+        zoom = g.depth / np.maximum(now, 1e-3)
+        limit = math.log(self.settings.max_zoom)
+        return (np.abs(np.log(zoom)) <= limit).astype(float)
 
     def _predicted_pose(self, motion: tuple[float, float, float] | None
                         ) -> tuple[float, float, float]:

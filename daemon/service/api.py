@@ -54,6 +54,21 @@ class AbortRequest:
     pass
 
 
+@dataclass(frozen=True)
+class SetPoseRequest:
+    """cmd/set_pose: start tracking at (x, y, yaw) in a place's frame (design §7)."""
+
+    place: int = setting(0, ge=1, doc="the place's id")
+    x: float = setting(0.0, ge=-1000.0, le=1000.0, doc="metres, in the place's frame")
+    y: float = setting(0.0, ge=-1000.0, le=1000.0)
+    yaw: float = setting(0.0, ge=-10.0, le=10.0, doc="radians")
+    sigma_xy: float | None = setting(None, gt=0.0, le=10.0, doc="spread of the particles "
+                                     "(m); default [localisation] initial_sigma_xy_m")
+    sigma_yaw: float | None = setting(None, gt=0.0, le=10.0, doc="radians; default "
+                                      "[localisation] initial_sigma_yaw_rad (above 0.2 "
+                                      "the orientation is taken from the view)")
+
+
 R = TypeVar("R")
 
 

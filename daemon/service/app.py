@@ -17,6 +17,7 @@ import zenoh
 import daemon
 from daemon.config import PlacecellConfig
 from daemon.localisation.localiser import Belief, Localiser
+from daemon.mapping.transition import Transition
 from daemon.service import api, zenoh_link
 from daemon.service.components import (
     LatestFrame,
@@ -42,6 +43,11 @@ from kernel.errors import PlacecellError
 from kernel.panorama import geometry_checksum
 
 log = logging.getLogger(__name__)
+
+# After Turn Back and Look the robot stands at the new place's reference pose, to within
+# the cross's own error: tracking starts there this sure.
+AFTER_LEARNING_SIGMA_M = 0.03
+AFTER_LEARNING_SIGMA_RAD = 0.03
 
 
 class Daemon:
@@ -106,9 +112,13 @@ class Daemon:
 
     def _localiser(self, acquisition: Any) -> Localiser:
         localiser = Localiser(self.config.mirror, self.config.panorama,
-                              places=self.mapper.place_count(), acquisition=acquisition)
+                              places=self.mapper.place_count(), acquisition=acquisition,
+                              settings=self.config.localisation,
+                              odometry_noise=self.config.odometry)
         for place in self.mapper.graph.places:
             localiser.know_place(place)
+        for transition in self.mapper.transitions():
+            localiser.know_transition(transition)
         last = self.mapper.last_place
         if last is not None:  # a restarted processing component goes on watching it
             localiser.watch_place(self.mapper.graph.place(last))
@@ -124,12 +134,13 @@ class Daemon:
         self._session = zenoh_link.open_session(z.mode, z.listen, z.connect, z.multicast_scouting)
         s = self._session
         self._token = s.liveliness().declare_token(zenoh_link.key(self.robot, "alive"))
-        for leaf in ("status", "events", "belief"):
+        for leaf in ("status", "events", "belief", "pose"):
             self._publishers[leaf] = s.declare_publisher(zenoh_link.key(self.robot, leaf))
         # Late joiners (placecellctl status) get the latest status at once by query.
         for leaf, handler in (("status", self._answer_status),
                               ("cmd/learn_place", self._answer_learn),
                               ("cmd/abort", self._answer_abort),
+                              ("cmd/set_pose", self._answer_set_pose),
                               ("map/places", self._answer_places),
                               ("map/transitions", self._answer_transitions)):
             self._queryables.append(s.declare_queryable(
@@ -231,14 +242,21 @@ class Daemon:
         if outcome.place is None and self.config.mapping.acquisition.enabled:
             self._acquire_after = time.monotonic() + 10.0  # do not retry at once
         localiser = self.processing.localiser
-        if outcome.place is not None and localiser is not None:
-            localiser.watch_place(outcome.place)
         if outcome.place is not None:
             p = outcome.place
+            added = self.mapper.graph.neighbours(p.id)
+            if localiser is not None:
+                localiser.watch_place(p)
+                for t in added:
+                    localiser.know_transition(t)
+                # Turn Back and Look ends where it began: at the new place's reference.
+                localiser.set_pose(p.id, (0.0, 0.0, 0.0), AFTER_LEARNING_SIGMA_M,
+                                   AFTER_LEARNING_SIGMA_RAD)
             self.publish_event("place_learned", place=p.id, label=p.label,
                                landmarks=p.landmark_count)
-            for t in self.mapper.graph.neighbours(p.id):
-                self.publish_event("transition_added", **{"from": t.from_id, "to": t.to_id})
+            for t in added:
+                self.publish_event("transition_added", source=t.source,
+                                   **{"from": t.from_id, "to": t.to_id})
         else:
             self.publish_event("learning_ended", code=str(outcome.error),
                                message=outcome.message)
@@ -264,6 +282,24 @@ class Daemon:
         job.abort()
         query.reply(query.key_expr, api.result(aborted=job.kind, received_ns=received_ns,
                                                stop_sent_ns=time.monotonic_ns()))
+
+    # ------------------------------------------------------------------ pose
+    def _answer_set_pose(self, query: zenoh.Query) -> None:
+        """cmd/set_pose: track from a pose the operator gives (design §7)."""
+        request = api.parse(api.SetPoseRequest, _payload(query), "set_pose")
+        localiser = self.processing.localiser
+        if localiser is None:
+            why = self.supervisor.health["processing"].last_error or "starting"
+            raise api.RequestError(api.ErrorCode.REFUSED, f"the localiser is not running: {why}")
+        if not self.mapper.has_place(request.place):
+            raise api.RequestError(api.ErrorCode.NOT_FOUND, f"place {request.place} is not in "
+                                   f"the map ({self.mapper.place_count()} places)")
+        localiser.set_pose(request.place, (request.x, request.y, request.yaw),
+                           request.sigma_xy, request.sigma_yaw)
+        log.info("pose set: place %d (%.3f, %.3f, %.3f)", request.place, request.x, request.y,
+                 request.yaw)
+        query.reply(query.key_expr, api.result(place=request.place, x=request.x, y=request.y,
+                                               yaw=request.yaw))
 
     # ------------------------------------------------------------------ map
     def _answer_places(self, query: zenoh.Query) -> None:
@@ -298,7 +334,10 @@ class Daemon:
         self._belief = belief
         self._belief_received_ns = time.monotonic_ns()
         body = _belief_body(belief)
+        self.publish("pose", zenoh_link.encode("placecell.pose", _pose_body(belief)))
         self.publish("belief", zenoh_link.encode("placecell.belief", body))
+        if belief.closed_transition is not None:
+            self._store_cycle(belief.closed_transition)
         try:
             self._maybe_acquire(belief)
         except PlacecellError as e:  # the map file refused: say so, keep localising
@@ -306,6 +345,22 @@ class Daemon:
             self._acquire_after = time.monotonic() + 10.0
         if self.recorder is not None:
             self.recorder.write_json("belief", belief.stamp_ns, body)
+
+    def _store_cycle(self, transition: Transition) -> None:
+        """A cycle closed by local estimates in both places (design §6, §7.1.3)."""
+        if self.config.mapping.mode != "mapping":
+            log.info("cycle %d -> %d measured; not stored in localisation mode",
+                     transition.from_id, transition.to_id)
+            return
+        try:
+            self.mapper.add_transition(transition)
+        except (PlacecellError, KeyError) as e:
+            log.error("could not store the cycle's transition: %s", e)
+            return
+        m = transition.T_from_to.mean
+        self.publish_event("transition_added", source="cycle", x=round(m.x, 4),
+                           y=round(m.y, 4), yaw=round(m.yaw, 5),
+                           **{"from": transition.from_id, "to": transition.to_id})
 
     # ------------------------------------------------------------------ status
     def status(self) -> dict[str, Any]:
@@ -450,10 +505,28 @@ def _try_reply(query: zenoh.Query, payload: bytes) -> None:
         log.debug("reply failed: %s", e)
 
 
+def _pose_body(belief: Belief) -> dict[str, Any]:
+    """``pose`` (design §11): the estimate in the current place's frame."""
+    pose = belief.pose_in_place
+    return {"stamp_ns": belief.stamp_ns, "state": belief.state, "reason": belief.reason,
+            "place": None if belief.place_id is None else {
+                "id": belief.place_id, "label": belief.place_label},
+            "x": None if pose is None else round(pose[0], 5),
+            "y": None if pose is None else round(pose[1], 5),
+            "yaw": None if pose is None else round(pose[2], 6),
+            "covariance": None if belief.covariance is None else [
+                float(f"{v:.6g}") for v in belief.covariance],
+            "confidence": round(belief.confidence, 4)}
+
+
 def _belief_body(belief: Belief) -> dict[str, Any]:
     return {"stamp_ns": belief.stamp_ns, "state": belief.state, "reason": belief.reason,
             "odometry_ok": belief.odometry_ok, "place_id": belief.place_id,
-            "pose_in_place": belief.pose_in_place,
+            "pose_in_place": belief.pose_in_place, "confidence": round(belief.confidence, 4),
+            "particles": belief.particles, "switched_from": belief.switched_from,
+            "scores": [{"place": sc.place_id, "lrp": round(sc.lrp, 4),
+                        "lead": round(sc.lead, 4)} for sc in belief.scores],
+            "timings_ms": belief.timings_ms,
             "recent_place": None if belief.recent_place is None else {
                 "id": belief.recent_place, "lrp": None if belief.recent_place_lrp is None
                 else round(belief.recent_place_lrp, 4)}}

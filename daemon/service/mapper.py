@@ -96,6 +96,12 @@ class Mapper:
             self._last_place, self._chain, self._pending = stored.id, self._pending, None
             return stored, added
 
+    def add_transition(self, transition: Transition) -> None:
+        """A transition measured while localising (a closed cycle, §7.1.3), both ways."""
+        with self._lock:
+            self.store.add_transition(transition)
+            self.graph.add_transition(transition)
+
     def set_background(self, place_id: int, background_lrp: float) -> None:
         """The place's background LRP, measured as the robot left it (design §6)."""
         with self._lock:
@@ -119,6 +125,10 @@ class Mapper:
     def transitions(self) -> list[Transition]:
         with self._lock:
             return self.graph.transitions
+
+    def has_place(self, place_id: int) -> bool:
+        with self._lock:
+            return place_id in self.graph
 
     def place_count(self) -> int:
         with self._lock:
