@@ -99,6 +99,16 @@ class UncertainSE2:
         j = self.mean.inverse_jacobian()
         return UncertainSE2(self.mean.inverse(), j @ self.covariance @ j.T)
 
+    def fuse(self, other: UncertainSE2) -> UncertainSE2:
+        """Two independent estimates of one pose, information-weighted (first order, yaw
+        unwrapped next to this one's):  Σ = (Σ₁⁻¹ + Σ₂⁻¹)⁻¹,  x = Σ (Σ₁⁻¹ x₁ + Σ₂⁻¹ x₂)."""
+        a = np.array(self.mean.as_tuple())
+        b = np.array(other.mean.as_tuple())
+        b[2] = a[2] + float(wrap_angle(b[2] - a[2]))
+        info_a, info_b = np.linalg.inv(self.covariance), np.linalg.inv(other.covariance)
+        cov = np.linalg.inv(info_a + info_b)
+        return UncertainSE2(SE2.of(cov @ (info_a @ a + info_b @ b)), cov)
+
     def mahalanobis2(self, truth: SE2) -> float:
         """Squared Mahalanobis distance of ``truth`` from this estimate (yaw wrapped)."""
         e = np.array([truth.x - self.mean.x, truth.y - self.mean.y,

@@ -80,6 +80,7 @@ class PlaceTracker:
         self.margin = place.landmarks.margin
         self.filter = ParticleFilter(settings, rng)
         self.estimate: Estimate | None = None
+        self.confidence = 0.0  # of the last update
 
     def start(self, grey: np.ndarray, pose: tuple[float, float, float], sigma_xy: float,
               sigma_yaw: float) -> None:
@@ -126,7 +127,8 @@ class PlaceTracker:
         self.estimate = f.estimate()
         at_estimate = self.model(np.array([self.estimate.pose]), bearings, sigma_bearing,
                                  self.geometry)[0]
-        return LocalResult(self.estimate, raw_output(at_estimate, weights),
+        self.confidence = raw_output(at_estimate, weights)
+        return LocalResult(self.estimate, self.confidence,
                            Observation(bearings, found.scores, weights),
                            float(np.mean(found.scores)))
 

@@ -134,6 +134,19 @@ class Localiser:
             s.initial_sigma_xy_m if sigma_xy is None else float(sigma_xy),
             s.initial_sigma_yaw_rad if sigma_yaw is None else float(sigma_yaw))
 
+    def reliable_estimate(self) -> tuple[int, UncertainSE2] | None:
+        """(place, T_place_robot) when the current estimate is reliable (σ_xy and
+        confidence as for closing a cycle), else None. Safe to call from another thread."""
+        tracker = self.tracker
+        if tracker is None or tracker.estimate is None:
+            return None
+        est, s = tracker.estimate, self.settings
+        cov = est.covariance
+        if tracker.confidence < s.reliable_confidence \
+                or (cov[0, 0] + cov[1, 1]) / 2 > s.reliable_sigma_m**2:
+            return None
+        return tracker.place.id, UncertainSE2(SE2.of(est.pose), cov)
+
     def add_odometry(self, samples: list[Odometry]) -> None:
         self.odometry.extend(samples)
         closure = self._closure
@@ -185,6 +198,20 @@ class Localiser:
                             switched_from, closed, recent, recent_lrp, decision, background,
                             {k: round(v, 3) for k, v in timings.items()})
 
+    def recognise(self, frame: Frame, place_ids: list[int]) -> tuple[PlaceScore, ...]:
+        """Each place's LRP in ``frame`` and its lead over the place's background (§9.2),
+        without touching the belief: what a frame's recognition step computes, for
+        evaluations that ask about places of their choosing."""
+        prepared = PreparedPanorama.of(to_grey(self.unwarper.unwarp(frame.image)))
+        return tuple(self._score(prepared, pid) for pid in place_ids)
+
+    def _score(self, prepared: PreparedPanorama, place_id: int) -> PlaceScore:
+        known = self._known[place_id]
+        lrp = self.matcher.lrp(prepared, known.templates)
+        background = self.settings.background_lrp if known.background is None \
+            else known.background
+        return PlaceScore(place_id, lrp, lrp - background)
+
     def _apply_pose_request(self, grey: np.ndarray, odo: Odometry | None) -> bool:
         request, self._pose_request = self._pose_request, None
         if request is None:
@@ -204,17 +231,14 @@ class Localiser:
         links = self._links.get(current, {})
         neighbours = [p for p in links if p in self._known]
         checked = self.switcher.to_check(current, neighbours, list(self._known))
-        scores = []
-        for pid in checked:
-            known = self._known[pid]
-            lrp = self.matcher.lrp(prepared, known.templates)
-            background = self.settings.background_lrp if known.background is None \
-                else known.background
-            scores.append(PlaceScore(pid, lrp, lrp - background))
-        switch = self.switcher.decide(current, neighbours, scores)
+        scores = [self._score(prepared, pid) for pid in checked]
+        estimate = self.tracker.estimate
+        x, y, _ = estimate.pose
+        distance = {current: math.hypot(x, y)} | {  # T_current_p's origin: p's reference
+            p: math.hypot(links[p].mean.x - x, links[p].mean.y - y) for p in neighbours}
+        switch = self.switcher.decide(current, neighbours, scores, distance)
         if switch is None:
             return tuple(scores), None
-        estimate = self.tracker.estimate
         here = UncertainSE2(SE2.of(estimate.pose), estimate.covariance)
         target = self._known[switch.place_id].place
         tracker = PlaceTracker(target, self.settings, self.model, self.rng)

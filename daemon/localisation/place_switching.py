@@ -2,10 +2,12 @@
 
 Every few frames the current place, its neighbours (by transition) and, in turn, a few
 other places are recognised (LRP minus background). A neighbour that leads the current
-place by ``switch_margin`` takes over: the estimate passes through the transition. A place
-with no transition from here must lead by ``cycle_margin`` on ``cycle_checks`` checks in a
-row; the estimate then restarts in it, and once it is reliable the cycle's transition is
-measured (:class:`CycleClosure`).
+place by ``switch_margin`` takes over — unless the estimate is nearer the current place's
+reference — and so does one whose reference the estimate is ``handover_m`` nearer to, if
+recognised nearly as well: the estimate passes through the transition. A place with no
+transition from here must lead by ``cycle_margin``, and stand ``cycle_min_lead`` above its
+background, on ``cycle_checks`` checks in a row; the estimate then restarts in it, and once
+it is reliable the cycle's transition is measured (:class:`CycleClosure`).
 """
 
 from __future__ import annotations
@@ -44,19 +46,34 @@ class PlaceSwitcher:
             chosen.append(self._streak[0])  # a place on a streak is checked every time
         return [current, *neighbours, *chosen]
 
-    def decide(self, current: int, neighbours: list[int], scores: list[PlaceScore]
-               ) -> Switch | None:
+    def decide(self, current: int, neighbours: list[int], scores: list[PlaceScore],
+               distance: dict[int, float] | None = None) -> Switch | None:
+        """``distance``: from the estimate to the reference of the current place and of
+        each neighbour (through the transitions)."""
         s = self.settings
         lead = {sc.place_id: sc.lead for sc in scores}
         here = lead.get(current, -1.0)
-        best_nb = max((p for p in neighbours if p in lead), key=lambda p: lead[p], default=None)
-        if best_nb is not None and lead[best_nb] >= here + s.switch_margin:
+        dist = distance or {}
+        d_here = dist.get(current, 0.0)
+        # §8.2: the neighbour's LRP rose above the current place's — if the estimate is no
+        # nearer the current place's reference (a place whose LRP stays high all along a
+        # corridor must not pull the estimate back to it).
+        rising = [p for p in neighbours if p in lead and lead[p] >= here + s.switch_margin
+                  and dist.get(p, 0.0) <= d_here]
+        # Beyond the thesis: positioning is most precise near a place's reference; hand
+        # over to a neighbour the estimate is handover_m nearer to, recognised nearly as
+        # well (a place's LRP may stay at its background until the robot is almost there).
+        nearer = [p for p in neighbours if p in lead and p in dist
+                  and dist[p] + s.handover_m <= d_here
+                  and lead[p] >= here - s.handover_tolerance]
+        best_nb = max(rising or nearer, key=lambda p: lead[p], default=None)
+        if best_nb is not None:
             self._streak = None
-            return Switch("neighbour", best_nb)  # §8.2: the neighbour's LRP rose above
-        ceiling = max(here, lead[best_nb] if best_nb is not None else -1.0)
+            return Switch("neighbour", best_nb)
+        ceiling = max([here] + [lead[p] for p in neighbours if p in lead])
         others = [sc for sc in scores if sc.place_id != current and sc.place_id not in neighbours]
         best = max(others, key=lambda sc: sc.lead, default=None)
-        if best is None or best.lead < ceiling + s.cycle_margin:
+        if best is None or best.lead < max(ceiling + s.cycle_margin, s.cycle_min_lead):
             if best is not None and self._streak is not None \
                     and self._streak[0] == best.place_id:
                 self._streak = None

@@ -14,6 +14,9 @@ SensorModelName = Literal["assumed", "estimated", "ellipsoid"]
 class LocalisationSettings:
     seed: int = setting(0, ge=0, doc="seed of the particle filter's random generator (a "
                         "replay through the daemon gives the same poses)")
+    initial_place: int = setting(0, ge=0, doc="track from initial_pose in this place as "
+                                 "soon as the daemon starts (0: wait for cmd/set_pose)")
+    initial_pose: list[float] = setting([0.0, 0.0, 0.0], doc="x, y, yaw in initial_place")
     particles: int = setting(2000, ge=50, le=100_000, doc="particles (thesis: 2000)")
     sensor_model: SensorModelName = setting(
         "ellipsoid", doc="assumed | estimated | ellipsoid (§8.1.4; the third is the default)")
@@ -62,12 +65,21 @@ class LocalisationSettings:
     switch_margin: float = setting(0.02, ge=0.0, le=1.0, doc="a neighbour takes over when "
                                    "its LRP minus background leads the current place's by "
                                    "this (§8.2)")
+    handover_m: float = setting(0.25, ge=0.0, le=10.0, doc="a neighbour whose reference "
+                                "the estimate is this much nearer than the current "
+                                "place's takes over...")
+    handover_tolerance: float = setting(0.1, ge=0.0, le=1.0, doc="...if its LRP minus "
+                                        "background is at most this below the current "
+                                        "place's")
     others_per_check: int = setting(4, ge=0, le=1000, doc="places beyond the neighbours "
                                     "tried per recognition, in turn (a place with no "
                                     "transition from here closes a cycle, §7.1.3)")
     cycle_margin: float = setting(0.08, ge=0.0, le=1.0, doc="a place with no transition "
                                   "from here must lead by this, on cycle_checks checks "
                                   "in a row, to be switched to")
+    cycle_min_lead: float = setting(0.15, ge=0.0, le=1.0, doc="...and stand this far "
+                                    "above its own background (recognised, not merely "
+                                    "less unlike than the current place)...")
     cycle_checks: int = setting(3, ge=1, le=100, doc="see cycle_margin")
     reliable_sigma_m: float = setting(0.05, gt=0.0, le=5.0, doc="an estimate is reliable "
                                       "when its xy std is below this...")
@@ -80,3 +92,8 @@ class LocalisationSettings:
                                       "reference (§9.3.2)")
     background_lrp: float = setting(0.7, ge=0.0, le=1.0,
                                     doc="a place's background LRP until it is measured")
+
+    def __post_init__(self) -> None:
+        if len(self.initial_pose) != 3:
+            raise ValueError(f"localisation.initial_pose is [x, y, yaw], got "
+                             f"{self.initial_pose}")

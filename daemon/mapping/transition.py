@@ -14,8 +14,9 @@ from typing import Literal
 from kernel.se2 import UncertainSE2
 
 # How a transition was measured: odometry between two places learned in one unbroken run
-# (§7.1.2), or a cycle closed by local estimates in both places (§7.1.3).
-TransitionSource = Literal["odometry", "cycle"]
+# (§7.1.2); that odometry fused with the local estimate in the last place at the new
+# place's reference ("vision"); or a cycle closed by local estimates in both places (§7.1.3).
+TransitionSource = Literal["odometry", "vision", "cycle"]
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,7 @@ from daemon.service.learn_job import (
 )
 from daemon.service.mapper import Mapper
 from daemon.service.notify import Notifier
+from daemon.service.pipeline import make_localiser
 from daemon.service.supervisor import Supervisor, describe
 from daemon.store.sqlite_store import MapStore
 from daemon.vision.unwarp import Unwarper
@@ -88,7 +89,9 @@ class Daemon:
     # ------------------------------------------------------------------ set-up
     def _build_components(self) -> None:
         cfg = self.config
-        mailbox = LatestFrame()
+        # A recording replayed as fast as it is processed: no frame skipped (design §10).
+        mailbox = LatestFrame(lockstep=cfg.camera.backend == "replay"
+                              and cfg.camera.replay.speed == 0)
         inbox = OdometryInbox()
         frame_taps, odo_taps = [], []
         if self.recorder is not None:
@@ -111,14 +114,8 @@ class Daemon:
             sup.add(c)
 
     def _localiser(self, acquisition: Any) -> Localiser:
-        localiser = Localiser(self.config.mirror, self.config.panorama,
-                              places=self.mapper.place_count(), acquisition=acquisition,
-                              settings=self.config.localisation,
-                              odometry_noise=self.config.odometry)
-        for place in self.mapper.graph.places:
-            localiser.know_place(place)
-        for transition in self.mapper.transitions():
-            localiser.know_transition(transition)
+        with self.mapper.lock:
+            localiser = make_localiser(self.config, self.mapper.graph, acquisition)
         last = self.mapper.last_place
         if last is not None:  # a restarted processing component goes on watching it
             localiser.watch_place(self.mapper.graph.place(last))
@@ -230,10 +227,14 @@ class Daemon:
                            settings=job_settings(self.config.tbl, request.extent_m),
                            unwarper=self._unwarper, feed=FrameFeed(rate),
                            mover=BaseCommands(lambda: self.base.device), mapper=self.mapper,
-                           reply=reply, on_done=self._learning_done)
+                           reply=reply, on_done=self._learning_done, seen=self._seen)
             self._job = job
             job.start()
         return job
+
+    def _seen(self) -> tuple[int, Any] | None:
+        localiser = self.processing.localiser
+        return None if localiser is None else localiser.reliable_estimate()
 
     def _learning_done(self, job: LearnJob, outcome: LearnOutcome) -> None:
         with self._job_lock:

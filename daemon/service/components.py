@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import threading
+import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -19,25 +20,35 @@ log = logging.getLogger(__name__)
 
 class LatestFrame:
     """A one-slot mailbox: the processing step always takes the newest frame; frames it
-    had no time for are counted as skipped, never queued up (latency stays low)."""
+    had no time for are counted as skipped, never queued up (latency stays low).
 
-    def __init__(self) -> None:
+    In ``lockstep`` (a recording replayed as fast as it is processed) the camera waits
+    for the slot to be taken instead, so no frame is skipped; after ``LOCKSTEP_WAIT_S``
+    (processing stopped) it gives up and counts the frame skipped."""
+
+    LOCKSTEP_WAIT_S = 5.0
+
+    def __init__(self, lockstep: bool = False) -> None:
         self._cond = threading.Condition()
         self._frame: Frame | None = None
+        self.lockstep = lockstep
         self.skipped = 0
 
     def put(self, frame: Frame) -> None:
         with self._cond:
+            if self.lockstep and self._frame is not None:
+                self._cond.wait_for(lambda: self._frame is None, self.LOCKSTEP_WAIT_S)
             if self._frame is not None:
                 self.skipped += 1
             self._frame = frame
-            self._cond.notify()
+            self._cond.notify_all()
 
     def take(self, timeout: float) -> Frame | None:
         with self._cond:
             if self._frame is None:
                 self._cond.wait(timeout)
             frame, self._frame = self._frame, None
+            self._cond.notify_all()
             return frame
 
 
@@ -136,6 +147,8 @@ class ProcessingComponent:
         frame = self._mailbox.take(timeout=0.2)
         if frame is None:
             return
+        if self._mailbox.lockstep:  # replay: the odometry up to the frame first
+            self._await_odometry(frame.stamp_ns)
         for frame_tap in self._frame_taps:
             frame_tap(frame)
         belief = self.localiser.process_frame(frame)
@@ -143,6 +156,21 @@ class ProcessingComponent:
         self._health().detail["timings_ms"] = belief.timings_ms
         self._health().detail["skipped_frames"] = self._mailbox.skipped
         self._on_belief(belief)
+
+    def _await_odometry(self, stamp_ns: int, timeout_s: float = 1.0) -> None:
+        """Wait until odometry reaches the frame's stamp (or ``timeout_s`` passes: a base
+        that stopped is then reported as missing odometry, as always)."""
+        assert self.localiser is not None
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            latest = self.localiser.odometry.latest
+            if latest is not None and latest.stamp_ns >= stamp_ns:
+                return
+            time.sleep(0.002)
+            samples = self._odometry.drain()
+            self.localiser.add_odometry(samples)
+            for odometry_tap in self._odometry_taps:
+                odometry_tap(samples)
 
     def teardown(self) -> None:
         self.localiser = None

@@ -24,7 +24,7 @@ from daemon.mapping.settings import TblSettings
 from daemon.mapping.tbl import Progress
 from daemon.service.api import ErrorCode
 from daemon.service.learning import drive_tbl, odometry_at_frame
-from daemon.service.mapper import Link, Mapper
+from daemon.service.mapper import Link, Mapper, Seen
 from daemon.vision.unwarp import Unwarper
 from hal.base.base import BaseInfo, BaseStatus
 from kernel.errors import (
@@ -144,8 +144,12 @@ class LearnJob:
 
     def __init__(self, *, label: str, settings: TblSettings, unwarper: Unwarper,
                  feed: FrameFeed, mover: BaseCommands, mapper: Mapper, reply: Reply,
-                 on_done: Callable[[LearnJob, LearnOutcome], None]) -> None:
+                 on_done: Callable[[LearnJob, LearnOutcome], None],
+                 seen: Callable[[], Seen | None] = lambda: None) -> None:
+        """``seen``: the localiser's reliable estimate of the robot now, if any (it joins
+        the new place to the map, design §6)."""
         self.label = label
+        self._seen = seen
         self.settings = settings
         self.unwarper = unwarper
         self.feed = feed
@@ -182,7 +186,7 @@ class LearnJob:
             self._reply("progress", {"phase": step.phase, "fraction": round(step.fraction, 3)})
 
     def _begin(self, start: Odometry) -> None:
-        self._link = self.mapper.begin_place(start)
+        self._link = self.mapper.begin_place(start, self._seen())
 
     def _run(self) -> None:
         outcome = LearnOutcome(None, ErrorCode.FAILED, "learning did not finish")

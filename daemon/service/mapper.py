@@ -17,7 +17,7 @@ from daemon.mapping.graph import TopologicalMap
 from daemon.mapping.odometry_chain import OdometryChain
 from daemon.mapping.place import Place
 from daemon.mapping.settings import OdometryNoiseSettings
-from daemon.mapping.transition import Transition
+from daemon.mapping.transition import Transition, TransitionSource
 from daemon.store.sqlite_store import MapStore, PlaceSummary
 from kernel.se2 import UncertainSE2
 from kernel.types import Odometry
@@ -27,10 +27,16 @@ log = logging.getLogger(__name__)
 
 @dataclasses.dataclass(frozen=True)
 class Link:
-    """Where a place being learned stands from the last place: T_last_new from odometry."""
+    """Where a place being learned stands from the last place: T_last_new from odometry,
+    or from odometry and the local estimate fused ("vision")."""
 
     from_id: int
     T_from_new: UncertainSE2
+    source: TransitionSource = "odometry"
+
+
+# The localiser's estimate of the robot in a place: (place id, T_place_robot).
+Seen = tuple[int, UncertainSE2]
 
 
 class Mapper:
@@ -62,19 +68,28 @@ class Mapper:
                     chain.broken = True
 
     # ------------------------------------------------------------ learning
-    def begin_place(self, reference: Odometry) -> Link | None:
+    def begin_place(self, reference: Odometry, seen: Seen | None = None) -> Link | None:
         """A place is being learned at the pose where odometry read ``reference``: start
         measuring from it, and say where it stands from the last place (None: no unbroken
-        run of odometry joins them)."""
+        run of odometry joins them). ``seen``: the localiser's reliable estimate of the
+        robot there; in the last place it is fused with the odometry (the odometry alone
+        drifts over every Turn Back and Look cross driven since), in another place of the
+        map it joins the new place to it when odometry cannot."""
         with self._lock:
             self._pending = OdometryChain(reference, self.noise)
             for s in self._recent:
                 if s.stamp_ns > reference.stamp_ns:
                     self._pending.add(s)
             chain, last = self._chain, self._last_place
-            if chain is None or last is None or chain.broken or last not in self.graph:
-                return None
-            return Link(last, chain.relative_at(reference))
+            odometry = None if chain is None or last is None or chain.broken \
+                or last not in self.graph else Link(last, chain.relative_at(reference))
+            if seen is None or seen[0] not in self.graph:
+                return odometry
+            if odometry is None:
+                return Link(seen[0], seen[1], "vision")
+            if odometry.from_id == seen[0]:
+                return Link(seen[0], odometry.T_from_new.fuse(seen[1]), "vision")
+            return odometry
 
     def cancel_place(self) -> None:
         with self._lock:
@@ -83,14 +98,14 @@ class Mapper:
     def add_place(self, place: Place, link: Link | None) -> tuple[Place, list[Transition]]:
         """Store a learned place (with its transition from the last place, both ways) and
         make it the one the next place is measured from."""
-        links = [] if link is None else [(link.from_id, link.T_from_new, "odometry")]
+        links = [] if link is None else [(link.from_id, link.T_from_new, link.source)]
         with self._lock:
             stored = self.store.add_place(place, links)
             # In memory without its panorama: the map file has it (design §6).
             self.graph.add_place(dataclasses.replace(stored, reference_panorama=None))
             added = []
             if link is not None:
-                t = Transition(link.from_id, stored.id, link.T_from_new, "odometry")
+                t = Transition(link.from_id, stored.id, link.T_from_new, link.source)
                 self.graph.add_transition(t)
                 added = list(t.both_ways())
             self._last_place, self._chain, self._pending = stored.id, self._pending, None
@@ -125,6 +140,11 @@ class Mapper:
     def transitions(self) -> list[Transition]:
         with self._lock:
             return self.graph.transitions
+
+    @property
+    def lock(self) -> threading.RLock:
+        """Held while the map is read as a whole (the graph changes under other threads)."""
+        return self._lock
 
     def has_place(self, place_id: int) -> bool:
         with self._lock:

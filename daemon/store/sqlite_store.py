@@ -60,7 +60,7 @@ CREATE TABLE transitions (
     to_id      INTEGER NOT NULL REFERENCES places(id),
     x REAL NOT NULL, y REAL NOT NULL, yaw REAL NOT NULL,   -- to's frame in from's (T_from_to)
     covariance BLOB NOT NULL,                             -- 3x3 float64, little endian
-    source     TEXT NOT NULL,                             -- odometry | cycle
+    source     TEXT NOT NULL,                             -- odometry | vision | cycle
     PRIMARY KEY (from_id, to_id)
 );
 CREATE INDEX transitions_to ON transitions(to_id);

@@ -18,6 +18,7 @@ GROUPS = {
     "sim": "tools.bench.sim",
     "landmarks": "tools.bench.landmarks",
     "mapfile": "tools.bench.mapfile",
+    "localisation": "tools.bench.localisation",
 }
 
 

@@ -28,6 +28,10 @@ EXPERIMENTS: dict[str, tuple[str, str, str]] = {
     "robustness": ("tools.eval.robustness", "office", "LRP under light changes and occlusion"),
     "tbl-local": ("tools.eval.tbl_local", "office", "local positioning along the TBL path "
                   "(design §7, thesis §8.1.5)"),
+    "cyclic": ("tools.eval.cyclic", "office", "tracking lap after lap round a loop of "
+               "places, against odometry (design §8, thesis §8.2)"),
+    "replay": ("tools.eval.replay", "", "a recording through the daemon's pipeline: "
+               "the daemon's poses, frame by frame (design §10)"),
     "mapping": ("tools.eval.mapping", "open-room", "places learned on the robot's own along "
                 "a tour, and how well they cover it (design §6)"),
 }

@@ -56,7 +56,9 @@ class Run:
     """One lock-step run; use as a context manager."""
 
     def __init__(self, cfg: PlacecellConfig, scenario: Scenario | None = None,
-                 frame_filter: FrameFilter | None = None) -> None:
+                 frame_filter: FrameFilter | None = None, map_path: Path | None = None
+                 ) -> None:
+        """``map_path``: keep the map file there (default: a temporary one)."""
         self.cfg = cfg
         self.ctx = HalContext(cfg)
         self.robot: SimRobot = self.ctx.shared("sim.robot",
@@ -66,7 +68,7 @@ class Run:
         self.localiser = Localiser(cfg.mirror, cfg.panorama, settings=cfg.localisation,
                                    odometry_noise=cfg.odometry)
         self._tmp = tempfile.TemporaryDirectory()
-        self.store = MapStore.open(Path(self._tmp.name) / "map.db",
+        self.store = MapStore.open(map_path or Path(self._tmp.name) / "map.db",
                                    geometry_checksum(cfg.mirror, cfg.panorama))
         self.mapper = Mapper(self.store, cfg.odometry)
         self.sensors = DeviceSensors(self.camera, self.base, cfg.tbl, on_odometry=self._odometry)
@@ -124,7 +126,7 @@ class Run:
         truth: list[tuple[float, float, float]] = []
 
         def start(odo: Any) -> None:  # at rest at the reference pose
-            link.append(self.mapper.begin_place(odo))
+            link.append(self.mapper.begin_place(odo, self.localiser.reliable_estimate()))
             truth.append(self.robot.true_pose())
 
         tbl = drive_tbl(self.sensors, self.base, self.localiser.unwarper, self.cfg.tbl,

@@ -34,14 +34,13 @@ from daemon.mapping.place import Place
 from daemon.service.learning import DeviceSensors, drive_tbl
 from daemon.service.mapper import Link, Mapper
 from daemon.store.sqlite_store import MapStore
-from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
-from daemon.vision.unwarp import Unwarper
 from hal.registry import HalContext, create_base, create_camera
 from hal.sim.factory import build_sim_robot
 from hal.sim.robot import SimRobot
 from hal.sim.scenario import Scenario, scenario_from_dict
 from kernel.errors import LearningError
-from kernel.panorama import geometry_checksum, to_grey
+from kernel.panorama import geometry_checksum
+from kernel.types import Frame
 
 RETRY_AFTER_M = 0.5  # a place that could not be learned: try again this far on
 
@@ -136,6 +135,8 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path
             path_m += math.dist(pose[:2], last_pose[:2])
             last_pose = pose
             belief = localiser.process_frame(frame)
+            if belief.closed_transition is not None:
+                mapper.add_transition(belief.closed_transition)
             for place_id, background in belief.backgrounds:
                 mapper.set_background(place_id, background)
             decision = belief.acquisition
@@ -149,7 +150,7 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path
             start_ns = frame.stamp_ns
             try:
                 tbl = drive_tbl(sensors, base, localiser.unwarper, cfg.tbl,
-                                on_start=functools.partial(_begin, mapper, link))
+                                on_start=functools.partial(_begin, mapper, link, localiser))
             except LearningError:
                 mapper.cancel_place()
                 failures += 1
@@ -157,10 +158,13 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path
                 continue
             learn_s.append((robot.now_ns() - start_ns) / 1e9)
             ref = _reference_pose(robot)
-            stored, _ = mapper.add_place(Place(tbl.result(), tbl.reference_panorama,
-                                               created_unix_s=time.time()), link[0])
+            stored, added = mapper.add_place(Place(tbl.result(), tbl.reference_panorama,
+                                                   created_unix_s=time.time()), link[0])
             refs.append(ref)
-            localiser.watch_place(stored)
+            localiser.watch_place(stored)  # as the daemon does after a learn job
+            for t in added[::2]:
+                localiser.know_transition(t)
+            localiser.set_pose(stored.id, (0.0, 0.0, 0.0), 0.03, 0.03)
             retry_at_m = None
             last_pose = robot.true_pose()
         places = mapper.graph.places
@@ -170,8 +174,9 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path
                           "wall_s": time.perf_counter() - t_wall}
 
 
-def _begin(mapper: Mapper, link: list[Link | None], start: Any) -> None:
-    link.append(mapper.begin_place(start))
+def _begin(mapper: Mapper, link: list[Link | None], localiser: Localiser, start: Any
+           ) -> None:
+    link.append(mapper.begin_place(start, localiser.reliable_estimate()))
 
 
 def _reference_pose(robot: SimRobot) -> tuple[float, float, float]:
@@ -187,12 +192,9 @@ def _second_pass(cfg: PlacecellConfig, scenario: Scenario, places: list[Place],
     if not places:
         return 0.0, 0
     robot = build_sim_robot(cfg, scenario)
-    matcher = FastMatcher()
-    prepared = [PreparedTemplates.of(p.landmarks.templates()) for p in places]
-    default_bg = cfg.mapping.acquisition.lrp_background
-    backgrounds = [default_bg if p.background_lrp is None else p.background_lrp
-                   for p in places]
-    unwarper = Unwarper(cfg.mirror, cfg.panorama)
+    localiser = Localiser(cfg.mirror, cfg.panorama, settings=cfg.localisation)
+    for place in places:  # with the backgrounds the first pass measured
+        localiser.know_place(place)
     rng = np.random.default_rng(args.seed)
     covered = total = 0
     step_ns = int(1e9 / 50)
@@ -208,10 +210,10 @@ def _second_pass(cfg: PlacecellConfig, scenario: Scenario, places: list[Place],
         run = 0.0
         assert robot.renderer is not None
         raw = robot.renderer.donut(pose, noise_sigma=cfg.camera.sim.noise_sigma, rng=rng)
-        pano = PreparedPanorama.of(to_grey(unwarper.unwarp(raw)))
-        near = [i for i, r in enumerate(refs) if math.dist(r[:2], pose[:2]) <= args.near]
-        best = max((matcher.lrp(pano, prepared[i]) - backgrounds[i] for i in near),
-                   default=-1.0)
+        near = [places[i].id for i, r in enumerate(refs)
+                if math.dist(r[:2], pose[:2]) <= args.near]
+        scores = localiser.recognise(Frame(raw, robot.now_ns(), total), near)
+        best = max((sc.lead for sc in scores), default=-1.0)
         covered += int(best >= args.margin)
         total += 1
     return covered / max(total, 1), total

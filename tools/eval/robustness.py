@@ -16,11 +16,11 @@ from typing import Any
 import numpy as np
 
 from daemon.config import load
-from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
-from daemon.vision.unwarp import Unwarper
+from daemon.localisation.localiser import Localiser
+from daemon.mapping.place import Place
 from hal.sim.render import Person
-from kernel.panorama import to_grey
-from tools.eval.places import learn, view
+from kernel.types import Frame
+from tools.eval.places import learn
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -32,22 +32,23 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     world = f"generate:office:{args.world_seed}"
     xs = np.linspace(3.0, 27.0, args.places)
     places = [learn(world, (float(x), 10.0, 0.0), args.seed) for x in xs]
-    unwarper = Unwarper(config.mirror, config.panorama)
-    matcher = FastMatcher()
-    sets = [PreparedTemplates.of(p.tbl.templates()) for p in places]
+    localiser = Localiser(config.mirror, config.panorama, settings=config.localisation)
+    for k, p in enumerate(places):  # the daemon's recognition of the places
+        localiser.know_place(Place(p.tbl, None, id=k + 1))
+    ids = list(range(1, len(places) + 1))
     rng = np.random.default_rng(args.seed)
     gains: dict[float, list[float]] = {0.5: [], 1.5: []}
     correct, margins = 0, []
+
+    def frame(place: Any, **view: Any) -> Frame:
+        return Frame(place.renderer.donut(place.pose, noise_sigma=2.0, rng=rng, **view), 0, 0)
+
     for k, place in enumerate(places):
         for gain in gains:
-            pano = PreparedPanorama.of(to_grey(view(place, unwarper, place.pose, rng,
-                                                    gain=gain)))
-            gains[gain].append(matcher.lrp(pano, sets[k]))
+            gains[gain].append(localiser.recognise(frame(place, gain=gain), [k + 1])[0].lrp)
         x, y, yaw = place.pose
         person = Person(x + math.cos(yaw), y + math.sin(yaw))  # 1 m ahead: ~28° hidden
-        pano = PreparedPanorama.of(to_grey(view(place, unwarper, place.pose, rng,
-                                                people=(person,))))
-        lrps = [matcher.lrp(pano, s) for s in sets]
+        lrps = [sc.lrp for sc in localiser.recognise(frame(place, people=(person,)), ids)]
         correct += int(int(np.argmax(lrps)) == k)
         margins.append(lrps[k] - max(v for j, v in enumerate(lrps) if j != k))
     return {

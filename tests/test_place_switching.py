@@ -1,0 +1,102 @@
+"""Which place to position in (design §8) and closing a cycle (§6, thesis §7.1.3)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from daemon.localisation.belief import PlaceScore
+from daemon.localisation.place_switching import CycleClosure, PlaceSwitcher
+from daemon.localisation.settings import LocalisationSettings
+from daemon.mapping.odometry_chain import OdometryChain
+from daemon.mapping.settings import OdometryNoiseSettings
+from kernel.se2 import SE2, UncertainSE2
+from kernel.types import Odometry
+
+S = LocalisationSettings()
+
+
+def scores(**leads: float) -> list[PlaceScore]:
+    return [PlaceScore(int(k[1:]), 0.7 + v, v) for k, v in leads.items()]
+
+
+def test_a_neighbour_whose_recognition_rises_above_takes_over() -> None:
+    sw = PlaceSwitcher(S)
+    # §8.2: the neighbour leads by the margin and the estimate is no nearer here.
+    assert sw.decide(1, [2], scores(p1=0.10, p2=0.13), {1: 1.0, 2: 0.9}).place_id == 2
+    # Within the margin: stay.
+    assert sw.decide(1, [2], scores(p1=0.10, p2=0.11), {1: 1.0, 2: 0.9}) is None
+
+
+def test_a_place_recognised_everywhere_does_not_pull_the_estimate_back() -> None:
+    sw = PlaceSwitcher(S)
+    # Place 1's LRP stays high all along a corridor; the robot is nearer place 2's reference.
+    assert sw.decide(2, [1], scores(p1=0.13, p2=0.05), {2: 0.3, 1: 1.0}) is None
+
+
+def test_hand_over_to_the_nearer_neighbour_recognised_nearly_as_well() -> None:
+    sw = PlaceSwitcher(S)
+    assert sw.decide(1, [2], scores(p1=0.10, p2=0.02), {1: 1.6, 2: 1.3}).place_id == 2
+    # Not if it is not recognised nearly as well, or not nearer by handover_m.
+    assert sw.decide(1, [2], scores(p1=0.10, p2=-0.05), {1: 1.6, 2: 1.3}) is None
+    assert sw.decide(1, [2], scores(p1=0.10, p2=0.05), {1: 1.6, 2: 1.5}) is None
+
+
+def test_a_place_without_transition_needs_a_streak_and_a_clear_lead() -> None:
+    sw = PlaceSwitcher(S)
+    strong = scores(p4=0.0, p3=0.01, p1=0.25)
+    assert sw.decide(4, [3], strong) is None
+    assert sw.decide(4, [3], strong) is None
+    switch = sw.decide(4, [3], strong)
+    assert switch is not None and switch.kind == "cycle" and switch.place_id == 1
+    # Leading, but not standing cycle_min_lead above its own background: never.
+    weak = scores(p4=-0.02, p3=-0.05, p1=0.13)
+    assert all(sw.decide(4, [3], weak) is None for _ in range(5))
+
+
+def test_other_places_are_tried_in_turn() -> None:
+    sw = PlaceSwitcher(LocalisationSettings(others_per_check=2))
+    seen = set()
+    for _ in range(3):
+        checked = sw.to_check(1, [2], [1, 2, 3, 4, 5, 6])
+        assert checked[:2] == [1, 2] and len(checked) == 4
+        seen |= set(checked[2:])
+    assert seen == {3, 4, 5, 6}
+
+
+def test_cycle_closure_composes_estimates_and_odometry() -> None:
+    """T_from_to = T_from_robot(switch) ∘ odometry ∘ T_to_robot(now)⁻¹, once reliable."""
+    T_from_to_true = SE2(4.0, 1.0, 0.5)
+    at_switch = SE2(3.0, 0.5, 0.2)  # robot in the old place when it switched
+    moved = SE2(0.8, 0.1, 0.1)  # odometry meanwhile
+    robot_now_in_old = at_switch.compose(moved)
+    robot_now_in_new = T_from_to_true.inverse().compose(robot_now_in_old)
+    chain = OdometryChain(Odometry(0.0, 0.0, 0.0, 0, 0), OdometryNoiseSettings())
+    for k in range(1, 11):  # the motion in 10 steps
+        f = k / 10
+        step = SE2(moved.x * f, moved.y * f, moved.yaw * f)
+        chain.add(Odometry(step.x, step.y, step.yaw, k * 50_000_000, k))
+    closure = CycleClosure(5, 1, UncertainSE2(at_switch, np.diag([1e-4, 1e-4, 1e-5])), chain,
+                           LocalisationSettings(reliable_frames=3))
+    now = UncertainSE2(robot_now_in_new, np.diag([4e-4, 4e-4, 1e-4]))
+    assert closure.observe(now, 0.9) is None and closure.observe(now, 0.9) is None
+    assert closure.observe(now, 0.2) is None  # not confident: the count starts again
+    for _ in range(2):
+        assert closure.observe(now, 0.9) is None
+    t = closure.observe(now, 0.9)
+    assert t is not None and (t.from_id, t.to_id, t.source) == (5, 1, "cycle")
+    m = t.T_from_to.mean
+    assert (m.x, m.y) == pytest.approx((4.0, 1.0), abs=1e-6)
+    assert m.yaw == pytest.approx(0.5, abs=1e-6)
+    assert np.all(np.linalg.eigvalsh(t.T_from_to.covariance) > 0)
+
+
+def test_fusing_two_estimates_weighs_by_information() -> None:
+    a = UncertainSE2(SE2(1.0, 0.0, math.pi - 0.01), np.diag([0.01, 0.01, 0.01]))
+    b = UncertainSE2(SE2(1.2, 0.0, -math.pi + 0.01), np.diag([0.01, 0.01, 0.01]) / 4)
+    f = a.fuse(b)
+    assert f.mean.x == pytest.approx(1.0 + 0.2 * 4 / 5)
+    assert abs(math.remainder(f.mean.yaw - math.pi, 2 * math.pi)) < 0.01  # across ±π
+    assert f.covariance[0, 0] == pytest.approx(0.01 / 5)

@@ -1,0 +1,177 @@
+"""``placecell-eval cyclic``: tracking round a loop of places, lap after lap, against
+odometry (design §6, §8; thesis §8.2: a 25 m path, 5 places, 4 laps).
+
+The simulated robot (lock-step, the default odometry drift) learns a place at the start,
+is told it stands there, and drives the loop once (``--loop-m`` round, a rectangle
+``--width-m`` wide), stopping to learn ``--places`` − 1 more places evenly spaced along it;
+the daemon's Localiser tracks it throughout, and as it comes back to the first place —
+which has no transition from the last — it closes the cycle (§7.1.3). Then ``--laps``
+laps follow, positioned by the same Localiser. Errors are against the simulator's truth
+in the current place's frame; the robot is holonomic and keeps its heading.
+
+Metrics: ``mean_error_m``, ``p95_error_m``, ``final_error_m`` (over the laps after the
+mapping lap), ``odometry_final_error_m`` (dead reckoning over those laps),
+``last_lap_over_first`` (mean error of the last lap over the first's), ``cycle_error_m``
+and ``cycle_error_deg`` (the closing transition measured by the localiser against the
+truth), ``loop_sum_error_m`` and ``loop_sum_error_deg`` (the same transition as the sum
+of the odometry transitions round the loop), ``cycles_closed``, ``place_switches``,
+``process_ms_median``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from daemon.config import load
+from daemon.localisation.belief import Belief
+from daemon.mapping.transition import Transition
+from kernel.se2 import SE2
+from tools.eval import plots
+from tools.eval.lockstep import Run, lockstep_config
+from tools.eval.tbl_local import localisation_settings
+
+DRAWS_PLOTS = True  # world-frame paths (estimate, truth, odometry), error per frame
+START = (3.0, 10.0, 0.0)  # office worlds: the west end of the corridor
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--places", type=int, default=5)
+    p.add_argument("--laps", type=int, default=4)
+    p.add_argument("--loop-m", type=float, default=6.25, help="length of one lap")
+    p.add_argument("--width-m", type=float, default=0.75, help="the loop's width")
+    p.add_argument("--speed", type=float, default=0.3)
+    p.add_argument("--start", type=float, nargs=3, default=START, metavar=("X", "Y", "YAW"))
+    p.add_argument("--sensor-model", choices=("assumed", "estimated", "ellipsoid"),
+                   default="ellipsoid")
+    p.add_argument("--particles", type=int, default=None)
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a [localisation] setting (repeatable)")
+
+
+def corners(loop_m: float, width_m: float) -> list[tuple[float, float]]:
+    """The loop's corners from the start, counter-clockwise: along +x, up +y, back, down."""
+    length = loop_m / 2 - width_m
+    return [(length, 0.0), (length, width_m), (0.0, width_m), (0.0, 0.0)]
+
+
+def legs(loop_m: float, width_m: float, stops: list[float]) -> Iterator[tuple[float, float,
+                                                                             bool]]:
+    """(dx, dy, stop_here) moves round the loop, split at the distances ``stops``."""
+    pts = [(0.0, 0.0), *corners(loop_m, width_m)]
+    travelled = 0.0
+    pending = sorted(stops)
+    for (x0, y0), (x1, y1) in zip(pts, pts[1:], strict=False):
+        seg = math.dist((x0, y0), (x1, y1))
+        ux, uy = (x1 - x0) / seg, (y1 - y0) / seg
+        done = 0.0
+        while pending and pending[0] < travelled + seg - 1e-9:
+            cut = pending.pop(0) - travelled
+            yield ux * (cut - done), uy * (cut - done), True
+            done = cut
+        yield ux * (seg - done), uy * (seg - done), False
+        travelled += seg
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    base = load(None)
+    world = f"generate:{args.world_kind}:{args.world_seed}"
+    settings = localisation_settings(base.localisation, args)
+    cfg = lockstep_config(args.seed, world=world, start_pose=tuple(args.start),
+                          localisation=settings)
+    spacing = args.loop_m / args.places
+    stops = [spacing * k for k in range(1, args.places)]
+    closed: list[Transition] = []
+    switches = 0
+    laps: list[list[float]] = []
+    paths: dict[str, list[tuple[float, float]]] = {"estimate": [], "truth": [],
+                                                    "odometry": []}
+    with Run(cfg) as r:
+        first = r.learn("place 1")
+        r.localiser.set_pose(first.id, (0.0, 0.0, 0.0), 0.03, 0.03)
+
+        def frames(dx: float, dy: float) -> Iterator[Belief]:
+            nonlocal switches
+            for belief in r.drive(dx, dy, 0.0, args.speed):
+                if belief.closed_transition is not None:  # stored as the daemon does
+                    closed.append(belief.closed_transition)
+                    r.mapper.add_transition(belief.closed_transition)
+                switches += belief.switched_from is not None
+                yield belief
+
+        for dx, dy, stop in legs(args.loop_m, args.width_m, stops):  # the mapping lap
+            for _ in frames(dx, dy):
+                pass
+            if stop:
+                place = r.learn(f"place {len(r.references) + 1}")
+                r.localiser.set_pose(place.id, (0.0, 0.0, 0.0), 0.03, 0.03)
+        odo_start, true_start = SE2.of(r.robot.odometry_pose()), SE2.of(r.robot.true_pose())
+        for _ in range(args.laps):
+            errors: list[float] = []
+            for dx, dy, _stop in legs(args.loop_m, args.width_m, []):
+                for belief in frames(dx, dy):
+                    error = r.error_m(belief)
+                    if error is None or belief.place_id is None \
+                            or belief.pose_in_place is None:
+                        continue
+                    errors.append(error)
+                    ref = r.references[belief.place_id]
+                    paths["estimate"].append(ref.compose(SE2.of(belief.pose_in_place)
+                                                         ).as_tuple()[:2])
+                    paths["truth"].append(r.robot.true_pose()[:2])
+                    paths["odometry"].append(true_start.compose(odo_start.between(
+                        SE2.of(r.robot.odometry_pose()))).as_tuple()[:2])
+            laps.append(errors)
+        odo_end, true_end = SE2.of(r.robot.odometry_pose()), SE2.of(r.robot.true_pose())
+        odo_move, true_move = odo_start.between(odo_end), true_start.between(true_end)
+        ids = sorted(r.references)
+        last, first_id = ids[-1], ids[0]
+        truth_cycle = r.references[last].between(r.references[first_id])
+        loop_sum = SE2()
+        for a, b in zip(ids[::-1], ids[::-1][1:], strict=False):  # last -> ... -> first
+            t = r.mapper.graph.transition(a, b)
+            loop_sum = loop_sum.compose(t.T_from_to.mean) if t is not None else loop_sum
+        cycle = next((t for t in closed if {t.from_id, t.to_id} == {last, first_id}), None)
+        process_ms = float(np.median(r.process_s)) * 1e3
+    all_errors = np.concatenate([np.array(e) for e in laps])
+    cycle_se2 = None if cycle is None else (cycle.T_from_to.mean if cycle.from_id == last
+                                            else cycle.T_from_to.mean.inverse())
+    if args.plots:
+        out = Path(args.plots)
+        plots.paths(out / "cyclic-path.png", {k: np.array(v) for k, v in paths.items()},
+                    title=f"cyclic: {args.laps} laps in {world}")
+        plots.series(out / "cyclic-error.png", {"error (m)": all_errors},
+                     title="position error per frame", x_label="frame", y_label="m")
+    return {
+        "world": {"kind": args.world_kind, "seed": args.world_seed},
+        "config": {"places": args.places, "laps": args.laps, "loop_m": args.loop_m,
+                   "width_m": args.width_m, "speed_m_s": args.speed,
+                   "sensor_model": settings.sensor_model, "particles": settings.particles,
+                   "drift": dataclasses.asdict(cfg.base.sim)},
+        "metrics": {
+            "mean_error_m": round(float(all_errors.mean()), 4),
+            "p95_error_m": round(float(np.percentile(all_errors, 95)), 4),
+            "final_error_m": round(float(laps[-1][-1]), 4),
+            "odometry_final_error_m": round(math.hypot(odo_move.x - true_move.x,
+                                                       odo_move.y - true_move.y), 4),
+            "last_lap_over_first": round(float(np.mean(laps[-1]) / np.mean(laps[0])), 3),
+            "cycle_error_m": None if cycle_se2 is None else round(
+                math.hypot(cycle_se2.x - truth_cycle.x, cycle_se2.y - truth_cycle.y), 4),
+            "cycle_error_deg": None if cycle_se2 is None else round(abs(math.degrees(
+                math.remainder(cycle_se2.yaw - truth_cycle.yaw, 2 * math.pi))), 3),
+            "loop_sum_error_m": round(math.hypot(loop_sum.x - truth_cycle.x,
+                                                 loop_sum.y - truth_cycle.y), 4),
+            "loop_sum_error_deg": round(abs(math.degrees(math.remainder(
+                loop_sum.yaw - truth_cycle.yaw, 2 * math.pi))), 3),
+            "cycles_closed": len(closed),
+            "place_switches": switches,
+            "frames": int(len(all_errors)),
+            "process_ms_median": round(process_ms, 2),
+        },
+    }
