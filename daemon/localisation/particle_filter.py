@@ -41,7 +41,7 @@ def resample(weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     exceeds mean + variance of the weights survives at least once."""
     indices = systematic_resample(weights, rng)
     keep = np.flatnonzero(weights > weights.mean() + weights.var())
-    missing = np.setdiff1d(keep, indices, assume_unique=False)
+    missing = keep[np.bincount(indices, minlength=len(weights))[keep] == 0]
     if len(missing):  # replace random draws by the missing ones
         slots = rng.choice(len(indices), size=len(missing), replace=False)
         indices[slots] = missing
@@ -79,13 +79,18 @@ def dominant_mode(particles: np.ndarray, weights: np.ndarray, radius_m: float = 
     weighted covariance."""
     mean = particles[int(np.argmax(weights))].copy()
     near = np.ones(len(particles), bool)
+    c, s = np.cos(particles[:, 2]), np.sin(particles[:, 2])
+    cos_radius = math.cos(radius_yaw)
     for _ in range(steps):
-        d_yaw = np.abs(np.mod(particles[:, 2] - mean[2] + math.pi, 2 * math.pi) - math.pi)
-        near = (np.hypot(particles[:, 0] - mean[0], particles[:, 1] - mean[1]) <= radius_m) \
-            & (d_yaw <= radius_yaw)
+        # |θ − θ̄| <= r  ⇔  cos(θ − θ̄) >= cos r
+        near = ((particles[:, 0] - mean[0]) ** 2 + (particles[:, 1] - mean[1]) ** 2
+                <= radius_m**2) & (c * math.cos(mean[2]) + s * math.sin(mean[2]) >= cos_radius)
         if not near.any():
             break
-        mean = weighted_mean_pose(particles[near], weights[near])
+        w = weights[near]
+        total = w.sum()
+        mean = np.array([w @ particles[near, 0] / total, w @ particles[near, 1] / total,
+                         math.atan2(float(w @ s[near]), float(w @ c[near]))])
     cov = weighted_covariance(particles[near], weights[near], mean)
     cov += np.diag([1e-8, 1e-8, 1e-10])  # never singular
     return Estimate((float(mean[0]), float(mean[1]), float(mean[2])), cov,

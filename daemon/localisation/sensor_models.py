@@ -18,6 +18,7 @@ import math
 from dataclasses import dataclass
 from typing import Protocol
 
+import numba
 import numpy as np
 
 from daemon.localisation.settings import LocalisationSettings
@@ -146,18 +147,34 @@ class EllipsoidLine:
 
     def __call__(self, particles: np.ndarray, bearings: np.ndarray, sigma_bearing: np.ndarray,
                  lm: LandmarkGeometry) -> np.ndarray:
-        u, p = _rays(particles, bearings)
-        off = lm.mean[None, :, :] - p  # μ − p, (N, M, 2)
-        n = np.stack([-u[..., 1], u[..., 0]], -1)  # normal of the ray
-        lateral = np.einsum("nmk,nmk->nm", n, off)  # n · (μ − p)
-        along = np.einsum("nmk,nmk->nm", u, off)  # u · (μ − p): ahead when > 0
+        out = np.empty((len(particles), len(bearings)))
         S = lm.covariance
-        nSn = (S[:, 0, 0] * n[..., 0] ** 2 + 2.0 * S[:, 0, 1] * n[..., 0] * n[..., 1]
-               + S[:, 1, 1] * n[..., 1] ** 2)  # nᵀ Σ n
-        range_sq = np.einsum("nmk,nmk->nm", off, off)
-        m2 = lateral**2 / (nSn + range_sq * sigma_bearing[None, :] ** 2 + 1e-12)
-        inside = (m2 <= self.gate**2) & (along > 0.0)
-        return np.where(inside, np.exp(-0.5 * m2), 0.0)
+        _ellipsoid_line(np.ascontiguousarray(particles, dtype=np.float64),
+                        np.cos(bearings), np.sin(bearings), lm.mean[:, 0].copy(),
+                        lm.mean[:, 1].copy(), S[:, 0, 0].copy(), S[:, 0, 1].copy(),
+                        S[:, 1, 1].copy(), np.asarray(sigma_bearing, float) ** 2,
+                        self.gate**2, out)
+        return out
+
+
+@numba.njit(cache=True, nogil=True, fastmath=True)
+def _ellipsoid_line(particles: np.ndarray, cos_b: np.ndarray, sin_b: np.ndarray,
+                    mx: np.ndarray, my: np.ndarray, s00: np.ndarray, s01: np.ndarray,
+                    s11: np.ndarray, sigma2: np.ndarray, gate2: float, out: np.ndarray
+                    ) -> None:  # pragma: no cover (compiled)
+    """EllipsoidLine for every particle n and landmark m (one pass, no N x M temporaries)."""
+    for n in range(particles.shape[0]):
+        x, y = particles[n, 0], particles[n, 1]
+        ct, st = np.cos(particles[n, 2]), np.sin(particles[n, 2])
+        for m in range(mx.shape[0]):
+            ux = ct * cos_b[m] - st * sin_b[m]  # u = (cos(θ + φ), sin(θ + φ))
+            uy = st * cos_b[m] + ct * sin_b[m]
+            ox, oy = mx[m] - x, my[m] - y  # μ − p
+            lateral = ux * oy - uy * ox  # n · (μ − p), n = (−u_y, u_x)
+            along = ux * ox + uy * oy  # ahead when > 0
+            nsn = s00[m] * uy * uy - 2.0 * s01[m] * ux * uy + s11[m] * ux * ux  # nᵀ Σ n
+            m2 = lateral * lateral / (nsn + (ox * ox + oy * oy) * sigma2[m] + 1e-12)
+            out[n, m] = np.exp(-0.5 * m2) if (m2 <= gate2 and along > 0.0) else 0.0
 
 
 MODELS: dict[str, type[AssumedDepth] | type[EstimatedDepth] | type[EllipsoidLine]] = {
@@ -178,7 +195,20 @@ def combine(likelihood: np.ndarray, weights: np.ndarray, floor: float) -> np.nda
     """log w_n = Σ_m w_m log(ε + (1 − ε) p_nm)   (N,) — the product of eq. 8.12 made robust:
     a landmark that sees nothing where the particle expects it (occluded, mis-associated)
     lowers the particle's weight by at most a factor ε^w, not to zero."""
-    return (np.log(floor + (1.0 - floor) * likelihood) * weights[None, :]).sum(axis=1)
+    out = np.empty(likelihood.shape[0])
+    _combine(np.ascontiguousarray(likelihood, dtype=np.float64),
+             np.asarray(weights, dtype=np.float64), floor, out)
+    return out
+
+
+@numba.njit(cache=True, nogil=True, fastmath=True)
+def _combine(likelihood: np.ndarray, weights: np.ndarray, floor: float, out: np.ndarray
+             ) -> None:  # pragma: no cover (compiled)
+    for n in range(likelihood.shape[0]):
+        total = 0.0
+        for m in range(likelihood.shape[1]):
+            total += weights[m] * np.log(floor + (1.0 - floor) * likelihood[n, m])
+        out[n] = total
 
 
 def raw_output(likelihood_row: np.ndarray, weights: np.ndarray) -> float:

@@ -32,13 +32,13 @@ import numpy as np
 from daemon.config import load
 from daemon.localisation.belief import Belief
 from daemon.mapping.transition import Transition
+from hal.sim.world import load_world
 from kernel.se2 import SE2
 from tools.eval import plots
 from tools.eval.lockstep import Run, lockstep_config
 from tools.eval.tbl_local import localisation_settings
 
 DRAWS_PLOTS = True  # world-frame paths (estimate, truth, odometry), error per frame
-START = (3.0, 10.0, 0.0)  # office worlds: the west end of the corridor
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -47,7 +47,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--loop-m", type=float, default=6.25, help="length of one lap")
     p.add_argument("--width-m", type=float, default=0.75, help="the loop's width")
     p.add_argument("--speed", type=float, default=0.3)
-    p.add_argument("--start", type=float, nargs=3, default=START, metavar=("X", "Y", "YAW"))
+    p.add_argument("--start", type=float, nargs=3, metavar=("X", "Y", "YAW"),
+                   help="where the loop starts (default: the world's start pose)")
     p.add_argument("--sensor-model", choices=("assumed", "estimated", "ellipsoid"),
                    default="ellipsoid")
     p.add_argument("--particles", type=int, default=None)
@@ -83,8 +84,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     base = load(None)
     world = f"generate:{args.world_kind}:{args.world_seed}"
     settings = localisation_settings(base.localisation, args)
-    cfg = lockstep_config(args.seed, world=world, start_pose=tuple(args.start),
-                          localisation=settings)
+    start = tuple(args.start) if args.start else load_world(world).start_pose
+    cfg = lockstep_config(args.seed, world=world, start_pose=start, localisation=settings)
     spacing = args.loop_m / args.places
     stops = [spacing * k for k in range(1, args.places)]
     closed: list[Transition] = []
