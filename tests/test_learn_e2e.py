@@ -195,6 +195,8 @@ def _track_dock_to_door(tmp: Path, references: dict[int, SE2], dock: int, door: 
         before = _ctl(config, "pose", "--json", timeout=30)
         assert before.returncode == 0, before.stderr
         assert _lines(before.stdout)[-1]["state"] == "uninitialised"
+        unknown = _ctl(config, "set-pose", "0", "0", "0", "--place", "99")
+        assert unknown.returncode == 4 and "not in the map" in unknown.stderr, unknown.stderr
         set_pose = _ctl(config, "set-pose", "0", "0", "0", "--place", str(dock),
                         "--sigma-xy", "0.05", "--json")
         assert set_pose.returncode == 0, set_pose.stderr
@@ -274,6 +276,17 @@ def test_malformed_learn_requests_get_an_error_that_says_why(tmp_path: Path,
     with pytest.raises(RequestError) as e:
         parse(LearnRequest, request_body, "learn_place")
     assert e.value.code == ErrorCode.BAD_REQUEST and str(e.value)
+
+
+@pytest.mark.parametrize("request_body", [b'{"x": 1}', b'{"place": 1, "x": "a"}',
+                                          b'{"place": 1, "yaw": 1e9}', b'{"place": 0}',
+                                          b'{"place": 1, "sigma_xy": -1}'])
+def test_malformed_set_pose_requests_get_an_error_that_says_why(request_body: bytes) -> None:
+    from daemon.service.api import ErrorCode, RequestError, SetPoseRequest, parse
+
+    with pytest.raises(RequestError) as e:
+        parse(SetPoseRequest, request_body, "set_pose")
+    assert e.value.code == ErrorCode.BAD_REQUEST and "set_pose" in str(e.value)
 
 
 @pytest.mark.parametrize(("overrides", "why"), [

@@ -100,3 +100,16 @@ def test_fusing_two_estimates_weighs_by_information() -> None:
     assert f.mean.x == pytest.approx(1.0 + 0.2 * 4 / 5)
     assert abs(math.remainder(f.mean.yaw - math.pi, 2 * math.pi)) < 0.01  # across ±π
     assert f.covariance[0, 0] == pytest.approx(0.01 / 5)
+
+
+def test_coming_round_a_loop_closes_the_cycle_at_once() -> None:
+    """The graph puts place 1 within cycle_near_m (through the sum round the loop) and it
+    is recognised above the current place and its neighbours: no streak needed."""
+    sw = PlaceSwitcher(S)
+    switch = sw.decide(5, [4], scores(p5=0.05, p4=0.0, p1=0.10), {5: 0.9, 4: 1.6, 1: 0.6})
+    assert switch is not None and (switch.kind, switch.place_id) == ("cycle", 1)
+    # Far by the graph, or not recognised above: the streak rule alone applies.
+    assert sw.decide(5, [4], scores(p5=0.05, p4=0.0, p1=0.10), {5: 0.9, 4: 1.6, 1: 2.5}) \
+        is None
+    assert sw.decide(5, [4], scores(p5=0.09, p4=0.0, p1=0.10), {5: 0.9, 4: 1.6, 1: 0.6}) \
+        is None

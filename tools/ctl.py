@@ -10,6 +10,7 @@ import queue
 import sys
 import time
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -163,8 +164,10 @@ def _simple_query(args: argparse.Namespace, leaf: str, payload: bytes = b""
     return EXIT_OK, replies[0]
 
 
-def cmd_abort(args: argparse.Namespace) -> int:
-    code, reply = _simple_query(args, "cmd/abort")
+def _command(args: argparse.Namespace, leaf: str, payload: bytes,
+             describe: Callable[[dict[str, Any]], str]) -> int:
+    """One query with one reply: an error exits non-zero, a result is printed."""
+    code, reply = _simple_query(args, leaf, payload)
     if reply is None:
         return code
     if reply.get("kind") == "error":
@@ -172,8 +175,12 @@ def cmd_abort(args: argparse.Namespace) -> int:
     if args.json:
         _print(reply)
     else:
-        print(f"aborted: {reply.get('aborted')}")
+        print(describe(reply))
     return EXIT_OK
+
+
+def cmd_abort(args: argparse.Namespace) -> int:
+    return _command(args, "cmd/abort", b"", lambda r: f"aborted: {r.get('aborted')}")
 
 
 def cmd_places(args: argparse.Namespace) -> int:
@@ -237,17 +244,9 @@ def cmd_set_pose(args: argparse.Namespace) -> int:
         request["sigma_xy"] = args.sigma_xy
     if args.sigma_yaw is not None:
         request["sigma_yaw"] = args.sigma_yaw
-    code, reply = _simple_query(args, "cmd/set_pose", json.dumps(request).encode())
-    if reply is None:
-        return code
-    if reply.get("kind") == "error":
-        return _error_exit(reply, args.json)
-    if args.json:
-        _print(reply)
-    else:
-        print(f"pose set: place {reply['place']} x {reply['x']:.3f} m, y {reply['y']:.3f} m, "
-              f"yaw {reply['yaw']:.3f} rad")
-    return EXIT_OK
+    return _command(args, "cmd/set_pose", json.dumps(request).encode(), lambda r: (
+        f"pose set: place {r['place']} x {r['x']:.3f} m, y {r['y']:.3f} m, "
+        f"yaw {r['yaw']:.3f} rad"))
 
 
 def format_pose(p: dict[str, Any]) -> str:

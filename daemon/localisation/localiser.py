@@ -235,7 +235,7 @@ class Localiser:
         estimate = self.tracker.estimate
         x, y, _ = estimate.pose
         distance = {current: math.hypot(x, y)} | {  # T_current_p's origin: p's reference
-            p: math.hypot(links[p].mean.x - x, links[p].mean.y - y) for p in neighbours}
+            p: math.hypot(T.x - x, T.y - y) for p, T in self._through_graph(current).items()}
         switch = self.switcher.decide(current, neighbours, scores, distance)
         if switch is None:
             return tuple(scores), None
@@ -258,6 +258,20 @@ class Localiser:
                                              self.settings)
         self.tracker = tracker
         return tuple(scores), current
+
+    def _through_graph(self, start: int, max_places: int = 64) -> dict[int, SE2]:
+        """T_start_p of the places nearest ``start`` by transitions (breadth first, the
+        first path found), up to ``max_places``."""
+        found = {start: SE2()}
+        queue = [start]
+        while queue and len(found) < max_places:
+            a = queue.pop(0)
+            for b, T in self._links.get(a, {}).items():
+                if b not in found:
+                    found[b] = found[a].compose(T.mean)
+                    queue.append(b)
+        del found[start]
+        return found
 
     def _observe_closure(self, local: LocalResult) -> Transition | None:
         assert self._closure is not None

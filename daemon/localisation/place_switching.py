@@ -12,6 +12,7 @@ it is reliable the cycle's transition is measured (:class:`CycleClosure`).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -49,7 +50,8 @@ class PlaceSwitcher:
     def decide(self, current: int, neighbours: list[int], scores: list[PlaceScore],
                distance: dict[int, float] | None = None) -> Switch | None:
         """``distance``: from the estimate to the reference of the current place and of
-        each neighbour (through the transitions)."""
+        other places reached through the transitions (neighbours directly, others along
+        the graph: a loop's places through the drifted sum round it)."""
         s = self.settings
         lead = {sc.place_id: sc.lead for sc in scores}
         here = lead.get(current, -1.0)
@@ -72,6 +74,14 @@ class PlaceSwitcher:
             return Switch("neighbour", best_nb)
         ceiling = max([here] + [lead[p] for p in neighbours if p in lead])
         others = [sc for sc in scores if sc.place_id != current and sc.place_id not in neighbours]
+        # Coming round a loop: the graph puts a place without a transition from here
+        # within cycle_near_m, and it is recognised above everything nearer by the graph.
+        near = [sc for sc in others if dist.get(sc.place_id, math.inf) <= s.cycle_near_m
+                and sc.lead >= ceiling + s.switch_margin
+                and dist[sc.place_id] <= d_here]
+        if near:
+            self._streak = None
+            return Switch("cycle", max(near, key=lambda sc: sc.lead).place_id)
         best = max(others, key=lambda sc: sc.lead, default=None)
         if best is None or best.lead < max(ceiling + s.cycle_margin, s.cycle_min_lead):
             if best is not None and self._streak is not None \

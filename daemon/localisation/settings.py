@@ -38,7 +38,7 @@ class LocalisationSettings:
                                     doc="per-frame std added to every particle (x, y)")
     diffusion_yaw_rad: float = setting(0.002, ge=0.0, le=0.5,
                                        doc="per-frame std added to every particle (yaw)")
-    bearing_sigma_deg: float = setting(2.0, gt=0.0, le=20.0, doc="std of a tracked bearing "
+    bearing_sigma_deg: float = setting(1.5, gt=0.0, le=20.0, doc="std of a tracked bearing "
                                        "at NCC 1 (the current observation)")
     assumed_depth_m: float = setting(2.5, gt=0.0, le=50.0,
                                      doc="assumed-depth model: every landmark this far")
@@ -80,6 +80,10 @@ class LocalisationSettings:
     cycle_min_lead: float = setting(0.15, ge=0.0, le=1.0, doc="...and stand this far "
                                     "above its own background (recognised, not merely "
                                     "less unlike than the current place)...")
+    cycle_near_m: float = setting(1.0, ge=0.0, le=10.0, doc="a place the transitions round "
+                                  "a loop put this near (and no farther than the current "
+                                  "place's reference) closes the cycle as soon as it is "
+                                  "recognised above the current place and its neighbours")
     cycle_checks: int = setting(3, ge=1, le=100, doc="see cycle_margin")
     reliable_sigma_m: float = setting(0.05, gt=0.0, le=5.0, doc="an estimate is reliable "
                                       "when its xy std is below this...")

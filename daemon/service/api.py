@@ -58,7 +58,7 @@ class AbortRequest:
 class SetPoseRequest:
     """cmd/set_pose: start tracking at (x, y, yaw) in a place's frame (design §7)."""
 
-    place: int = setting(0, ge=1, doc="the place's id")
+    place: int | None = setting(None, ge=1, doc="the place's id (required)")
     x: float = setting(0.0, ge=-1000.0, le=1000.0, doc="metres, in the place's frame")
     y: float = setting(0.0, ge=-1000.0, le=1000.0)
     yaw: float = setting(0.0, ge=-10.0, le=10.0, doc="radians")
@@ -67,6 +67,10 @@ class SetPoseRequest:
     sigma_yaw: float | None = setting(None, gt=0.0, le=10.0, doc="radians; default "
                                       "[localisation] initial_sigma_yaw_rad (above 0.2 "
                                       "the orientation is taken from the view)")
+
+    def __post_init__(self) -> None:
+        if self.place is None:
+            raise ValueError("place is required: the id of the place the pose is in")
 
 
 R = TypeVar("R")

@@ -292,7 +292,7 @@ class Daemon:
         if localiser is None:
             why = self.supervisor.health["processing"].last_error or "starting"
             raise api.RequestError(api.ErrorCode.REFUSED, f"the localiser is not running: {why}")
-        if not self.mapper.has_place(request.place):
+        if request.place is None or not self.mapper.has_place(request.place):
             raise api.RequestError(api.ErrorCode.NOT_FOUND, f"place {request.place} is not in "
                                    f"the map ({self.mapper.place_count()} places)")
         localiser.set_pose(request.place, (request.x, request.y, request.yaw),
