@@ -196,3 +196,26 @@ def test_initial_orientation_ignores_poor_matches_and_outliers() -> None:
     now[4] += 2.0
     assert initial_orientation(now, ref, ncc, 0.85) == pytest.approx(theta, abs=1e-9)
     assert initial_orientation(now[:2], ref[:2], ncc[:2], 0.85) is None
+
+
+def test_consensus_finds_the_landmarks_the_true_pose_explains() -> None:
+    from daemon.localisation.local_positioning import PlaceTracker
+    from daemon.mapping.place import Place
+    from daemon.vision.landmarks import Landmark, LandmarkSet
+
+    rng = np.random.default_rng(8)
+    bearings = np.radians(np.linspace(-170, 170, 16))
+    cov = np.diag([0.02**2, math.radians(0.2) ** 2])
+    lms = tuple(Landmark(np.zeros((16, 16), np.uint8), 50, 0, float(b), 2.5, cov)
+                for b in bearings)
+    settings = LocalisationSettings(particles=400, consensus_sigma_deg=0.5)
+    tracker = PlaceTracker(Place(LandmarkSet(lms, 720, 16), None, id=1), settings,
+                           EllipsoidLine(settings), rng)
+    truth = (0.1, 0.05, 0.0)
+    tracker.filter.initialise(truth, 0.05, 0.02)
+    tracker.filter.particles[0] = truth
+    seen = observed(tracker.geometry, truth)
+    wrong = [2, 7, 11, 13, 15]
+    seen[wrong] += np.radians([4.0, -5.0, 3.5, -4.5, 6.0])  # mis-associated
+    keep = tracker._consensus(seen, np.ones(16))
+    assert set(np.flatnonzero(keep < 1.0)) == set(wrong)

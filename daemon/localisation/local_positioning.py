@@ -122,6 +122,8 @@ class PlaceTracker:
         weights = ncc_weights(found.scores, self.settings.min_ncc) * self._scale_kept(predicted)
         sigma_bearing = math.radians(self.settings.bearing_sigma_deg) * (
             1.0 + 10.0 * (1.0 - np.clip(found.scores, 0.0, 1.0)))
+        if self.settings.consensus_sigma_deg > 0:
+            weights = weights * self._consensus(bearings, weights)
         likelihood = self.model(f.particles, bearings, sigma_bearing, self.geometry)  # step 3
         f.weigh(combine(likelihood, weights, self.settings.outlier_floor))
         self.estimate = f.estimate()
@@ -140,6 +142,16 @@ class PlaceTracker:
         sigma_yaw = float(np.clip(math.sqrt(max(covariance[2, 2], 0.0)), 0.02, 0.3))
         self.filter.initialise(pose, sigma_xy, sigma_yaw)
         self.estimate = Estimate(pose, np.diag([sigma_xy**2, sigma_xy**2, sigma_yaw**2]), 1.0)
+
+    def _consensus(self, bearings: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        """1 for the landmarks the best-supported particle explains tightly, else a tenth:
+        with a tight tolerance a pose that half-explains everything (mis-associated
+        landmarks pulling it) explains nothing well, the true pose most landmarks."""
+        tight = np.full(len(bearings), math.radians(self.settings.consensus_sigma_deg))
+        fits = self.model(self.filter.particles, bearings, tight, self.geometry) > 0.1353
+        support = (fits * (weights > 0)).sum(axis=1)  # m <= 2 sigma_tight
+        best = fits[int(np.argmax(support))]
+        return np.where(best, 1.0, 0.1)
 
     def _scale_kept(self, pose: tuple[float, float, float]) -> np.ndarray:
         """1 for landmarks that appear at most ``max_zoom`` times larger or smaller than
