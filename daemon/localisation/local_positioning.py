@@ -27,23 +27,13 @@ from daemon.mapping.place import Place
 from daemon.vision.landmarks import TEMPLATE
 from daemon.vision.tracking import Track, column_to_bearing_of_centre, predict_column, track
 from kernel.angles import wrap_angle
-
-
-@dataclass(frozen=True)
-class Observation:
-    """What the place's landmarks showed in one frame."""
-
-    bearings: np.ndarray  # (M,) robot frame
-    ncc: np.ndarray  # (M,)
-    weights: np.ndarray  # (M,) NCC weights of the sensor model
+from kernel.se2 import SE2
 
 
 @dataclass(frozen=True)
 class LocalResult:
     estimate: Estimate
     confidence: float  # raw sensor-model output at the estimate, [0, 1]
-    observation: Observation
-    tracked_ncc_mean: float
 
 
 def initial_orientation(bearings: np.ndarray, reference: np.ndarray, ncc: np.ndarray,
@@ -94,8 +84,7 @@ class PlaceTracker:
                                          self.settings.orientation_ncc)
             if theta0 is not None:
                 pose, sigma_yaw = (pose[0], pose[1], theta0), math.radians(3.0)
-        self.filter.initialise(pose, sigma_xy, sigma_yaw)
-        self.estimate = Estimate(pose, np.diag([sigma_xy**2, sigma_xy**2, sigma_yaw**2]), 1.0)
+        self._spread(pose, sigma_xy, sigma_yaw)
 
     def update(self, grey: np.ndarray, motion: tuple[float, float, float] | None,
                dt_s: float) -> LocalResult:
@@ -111,8 +100,8 @@ class PlaceTracker:
             f.predict(motion, dt_s)  # step 2
         predicted = self._predicted_pose(motion)
         sigma = self.estimate.covariance
-        spread = 3.0 * (math.sqrt(max(sigma[2, 2], 0.0))
-                        + math.sqrt(max(sigma[0, 0] + sigma[1, 1], 0.0)) / 1.0)
+        spread = 3.0 * (math.sqrt(max(sigma[2, 2], 0.0))  # rad: yaw, plus xy as if 1 m off
+                        + math.sqrt(max(sigma[0, 0] + sigma[1, 1], 0.0)))
         radius = self.settings.search_cols + int(math.ceil(spread * self.width
                                                            / (2 * math.pi)))
         found = self._track(grey, predicted, min(radius, self.width // 2 - TEMPLATE))
@@ -130,9 +119,7 @@ class PlaceTracker:
         at_estimate = self.model(np.array([self.estimate.pose]), bearings, sigma_bearing,
                                  self.geometry)[0]
         self.confidence = raw_output(at_estimate, weights)
-        return LocalResult(self.estimate, self.confidence,
-                           Observation(bearings, found.scores, weights),
-                           float(np.mean(found.scores)))
+        return LocalResult(self.estimate, self.confidence)
 
     def move_to(self, pose: tuple[float, float, float], covariance: np.ndarray) -> None:
         """Redistribute the particles around ``pose`` (a pose passed in from another
@@ -140,6 +127,11 @@ class PlaceTracker:
         sigma_xy = float(np.clip(math.sqrt(max(covariance[0, 0] + covariance[1, 1], 0.0) / 2),
                                  0.03, 0.5))
         sigma_yaw = float(np.clip(math.sqrt(max(covariance[2, 2], 0.0)), 0.02, 0.3))
+        self._spread(pose, sigma_xy, sigma_yaw)
+
+    def _spread(self, pose: tuple[float, float, float], sigma_xy: float, sigma_yaw: float
+                ) -> None:
+        """Particles ~ N(pose, σ), and the estimate that says so until the next frame."""
         self.filter.initialise(pose, sigma_xy, sigma_yaw)
         self.estimate = Estimate(pose, np.diag([sigma_xy**2, sigma_xy**2, sigma_yaw**2]), 1.0)
 
@@ -166,13 +158,11 @@ class PlaceTracker:
 
     def _predicted_pose(self, motion: tuple[float, float, float] | None
                         ) -> tuple[float, float, float]:
+        """The last estimate moved by the odometry increment (robot frame)."""
         assert self.estimate is not None
-        x, y, th = self.estimate.pose
         if motion is None:
-            return x, y, th
-        dx, dy, dth = motion
-        c, s = math.cos(th), math.sin(th)
-        return x + c * dx - s * dy, y + s * dx + c * dy, float(wrap_angle(th + dth))
+            return self.estimate.pose
+        return SE2.of(self.estimate.pose).compose(SE2.of(motion)).as_tuple()
 
     def _track(self, grey: np.ndarray, pose: tuple[float, float, float], radius: int
                ) -> Track:

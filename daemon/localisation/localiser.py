@@ -26,7 +26,7 @@ import numpy as np
 from daemon.localisation.belief import Belief, BeliefState, PlaceScore
 from daemon.localisation.local_positioning import LocalResult, PlaceTracker
 from daemon.localisation.odometry import OdometryBuffer, relative_motion
-from daemon.localisation.place_switching import CycleClosure, PlaceSwitcher
+from daemon.localisation.place_switching import CycleClosure, PlaceSwitcher, reliable
 from daemon.localisation.sensor_models import make_model
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.acquisition import AcquisitionDecision, BackgroundMeter, PlaceAcquisition
@@ -43,6 +43,10 @@ from kernel.sensor_settings import MirrorSettings, PanoramaSettings
 from kernel.types import Frame, Odometry
 
 __all__ = ["Belief", "BeliefState", "Localiser", "PlaceScore"]
+
+# How sure the pose is at a place's reference right after Turn Back and Look.
+AFTER_LEARNING_SIGMA_M = 0.03
+AFTER_LEARNING_SIGMA_RAD = 0.03
 
 
 @dataclass(frozen=True)
@@ -118,6 +122,16 @@ class Localiser:
         self.know_place(place)
         self._watch_next = (place.id, self._known[place.id].templates)
 
+    def place_learned(self, place: Place, transitions: list[Transition]) -> None:
+        """A place just learned, with its transitions: acquisition watches it, and tracking
+        starts at its reference — Turn Back and Look ends where it began, to within the
+        cross's own error (AFTER_LEARNING_SIGMA). Safe to call from another thread."""
+        self.watch_place(place)
+        for t in transitions:
+            self.know_transition(t)
+        self.set_pose(place.id, (0.0, 0.0, 0.0), AFTER_LEARNING_SIGMA_M,
+                      AFTER_LEARNING_SIGMA_RAD)
+
     def set_pose(self, place_id: int, pose: tuple[float, float, float],
                  sigma_xy: float | None = None, sigma_yaw: float | None = None) -> None:
         """Start tracking at ``pose`` in place ``place_id`` from the next frame on (design
@@ -140,12 +154,10 @@ class Localiser:
         tracker = self.tracker
         if tracker is None or tracker.estimate is None:
             return None
-        est, s = tracker.estimate, self.settings
-        cov = est.covariance
-        if tracker.confidence < s.reliable_confidence \
-                or (cov[0, 0] + cov[1, 1]) / 2 > s.reliable_sigma_m**2:
+        est = tracker.estimate
+        if not reliable(est.covariance, tracker.confidence, self.settings):
             return None
-        return tracker.place.id, UncertainSE2(SE2.of(est.pose), cov)
+        return tracker.place.id, UncertainSE2(SE2.of(est.pose), est.covariance)
 
     def add_odometry(self, samples: list[Odometry]) -> None:
         self.odometry.extend(samples)

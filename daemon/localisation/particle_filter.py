@@ -55,14 +55,6 @@ class Estimate:
     mode_share: float  # the weight the dominant mode holds (1: unimodal)
 
 
-def weighted_mean_pose(particles: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """(x̄, ȳ, θ̄) with θ̄ the circular mean atan2(Σ w sin θ, Σ w cos θ)."""
-    w = weights / weights.sum()
-    return np.array([w @ particles[:, 0], w @ particles[:, 1],
-                     math.atan2(float(w @ np.sin(particles[:, 2])),
-                                float(w @ np.cos(particles[:, 2])))])
-
-
 def weighted_covariance(particles: np.ndarray, weights: np.ndarray, mean: np.ndarray
                         ) -> np.ndarray:
     """Σ = Σ_i w_i e_i e_iᵀ, e_i = particle − mean, θ wrapped."""

@@ -16,6 +16,8 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+import numpy as np
+
 from daemon.localisation.belief import PlaceScore
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.odometry_chain import OdometryChain
@@ -96,6 +98,13 @@ class PlaceSwitcher:
         return None
 
 
+def reliable(covariance: np.ndarray, confidence: float, s: LocalisationSettings) -> bool:
+    """An estimate to build on: its xy std within ``reliable_sigma_m`` and its confidence
+    at least ``reliable_confidence`` (a cycle's transition, a new place's link)."""
+    return confidence >= s.reliable_confidence and \
+        (covariance[0, 0] + covariance[1, 1]) / 2 <= s.reliable_sigma_m**2
+
+
 class CycleClosure:
     """A cycle being closed (§7.1.3, design §6): the robot left place ``from_id`` for place
     ``to_id``, which has no transition from it. T_from_to = (estimate in from) ∘ (odometry
@@ -112,12 +121,9 @@ class CycleClosure:
     def observe(self, T_to_robot: UncertainSE2, confidence: float) -> Transition | None:
         """The estimate in ``to`` this frame; the transition once it has been reliable
         for ``reliable_frames`` frames in a row."""
-        s = self.settings
-        cov = T_to_robot.covariance
-        reliable = confidence >= s.reliable_confidence and \
-            (cov[0, 0] + cov[1, 1]) / 2 <= s.reliable_sigma_m**2
-        self.reliable_frames = self.reliable_frames + 1 if reliable else 0
-        if self.reliable_frames < s.reliable_frames or self.odometry.broken:
+        ok = reliable(T_to_robot.covariance, confidence, self.settings)
+        self.reliable_frames = self.reliable_frames + 1 if ok else 0
+        if self.reliable_frames < self.settings.reliable_frames or self.odometry.broken:
             return None
         T = self.T_from_robot.compose(self.odometry.relative()).compose(T_to_robot.inverse())
         return Transition(self.from_id, self.to_id, T, "cycle")

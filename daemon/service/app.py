@@ -33,7 +33,7 @@ from daemon.service.learn_job import (
     LearnOutcome,
     job_settings,
 )
-from daemon.service.mapper import Mapper
+from daemon.service.mapper import Mapper, Seen
 from daemon.service.notify import Notifier
 from daemon.service.pipeline import make_localiser
 from daemon.service.supervisor import Supervisor, describe
@@ -44,11 +44,6 @@ from kernel.errors import PlacecellError
 from kernel.panorama import geometry_checksum
 
 log = logging.getLogger(__name__)
-
-# After Turn Back and Look the robot stands at the new place's reference pose, to within
-# the cross's own error: tracking starts there this sure.
-AFTER_LEARNING_SIGMA_M = 0.03
-AFTER_LEARNING_SIGMA_RAD = 0.03
 
 
 class Daemon:
@@ -232,7 +227,7 @@ class Daemon:
             job.start()
         return job
 
-    def _seen(self) -> tuple[int, Any] | None:
+    def _seen(self) -> Seen | None:
         localiser = self.processing.localiser
         return None if localiser is None else localiser.reliable_estimate()
 
@@ -247,12 +242,7 @@ class Daemon:
             p = outcome.place
             added = self.mapper.graph.neighbours(p.id)
             if localiser is not None:
-                localiser.watch_place(p)
-                for t in added:
-                    localiser.know_transition(t)
-                # Turn Back and Look ends where it began: at the new place's reference.
-                localiser.set_pose(p.id, (0.0, 0.0, 0.0), AFTER_LEARNING_SIGMA_M,
-                                   AFTER_LEARNING_SIGMA_RAD)
+                localiser.place_learned(p, added)
             self.publish_event("place_learned", place=p.id, label=p.label,
                                landmarks=p.landmark_count)
             for t in added:

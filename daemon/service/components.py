@@ -140,10 +140,7 @@ class ProcessingComponent:
 
     def step(self) -> None:
         assert self.localiser is not None  # set by setup(), which the supervisor runs first
-        samples = self._odometry.drain()
-        self.localiser.add_odometry(samples)
-        for odometry_tap in self._odometry_taps:
-            odometry_tap(samples)
+        self._hand_over_odometry()
         frame = self._mailbox.take(timeout=0.2)
         if frame is None:
             return
@@ -167,10 +164,15 @@ class ProcessingComponent:
             if latest is not None and latest.stamp_ns >= stamp_ns:
                 return
             time.sleep(0.002)
-            samples = self._odometry.drain()
-            self.localiser.add_odometry(samples)
-            for odometry_tap in self._odometry_taps:
-                odometry_tap(samples)
+            self._hand_over_odometry()
+
+    def _hand_over_odometry(self) -> None:
+        """The samples the base delivered since: to the localiser and every tap."""
+        assert self.localiser is not None
+        samples = self._odometry.drain()
+        self.localiser.add_odometry(samples)
+        for odometry_tap in self._odometry_taps:
+            odometry_tap(samples)
 
     def teardown(self) -> None:
         self.localiser = None

@@ -62,8 +62,7 @@ def cycle_ms(repeats: int) -> tuple[float, float]:
         first = r.learn("a")
         for _ in r.drive(1.5, 0.0, 0.0, 0.3):
             pass
-        r.learn("b")
-        r.localiser.set_pose(2, (0.0, 0.0, 0.0), 0.03, 0.03)
+        r.learn("b")  # tracking starts at its reference
         r.process_s.clear()
         recognising = []
         for _ in range(max(1, repeats // 4)):

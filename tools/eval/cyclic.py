@@ -35,8 +35,12 @@ from daemon.mapping.transition import Transition
 from hal.sim.world import load_world
 from kernel.se2 import SE2
 from tools.eval import plots
-from tools.eval.lockstep import Run, lockstep_config
-from tools.eval.tbl_local import localisation_settings
+from tools.eval.lockstep import (
+    Run,
+    add_localisation_arguments,
+    localisation_settings,
+    lockstep_config,
+)
 
 DRAWS_PLOTS = True  # world-frame paths (estimate, truth, odometry), error per frame
 
@@ -49,11 +53,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--speed", type=float, default=0.3)
     p.add_argument("--start", type=float, nargs=3, metavar=("X", "Y", "YAW"),
                    help="where the loop starts (default: the world's start pose)")
-    p.add_argument("--sensor-model", choices=("assumed", "estimated", "ellipsoid"),
-                   default="ellipsoid")
-    p.add_argument("--particles", type=int, default=None)
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a [localisation] setting (repeatable)")
+    add_localisation_arguments(p)
 
 
 def corners(loop_m: float, width_m: float) -> list[tuple[float, float]]:
@@ -94,8 +94,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     paths: dict[str, list[tuple[float, float]]] = {"estimate": [], "truth": [],
                                                     "odometry": []}
     with Run(cfg) as r:
-        first = r.learn("place 1")
-        r.localiser.set_pose(first.id, (0.0, 0.0, 0.0), 0.03, 0.03)
+        r.learn("place 1")  # tracking starts at each place learned
 
         def frames(dx: float, dy: float) -> Iterator[Belief]:
             nonlocal switches
@@ -110,8 +109,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             for _ in frames(dx, dy):
                 pass
             if stop:
-                place = r.learn(f"place {len(r.references) + 1}")
-                r.localiser.set_pose(place.id, (0.0, 0.0, 0.0), 0.03, 0.03)
+                r.learn(f"place {len(r.references) + 1}")
         odo_start, true_start = SE2.of(r.robot.odometry_pose()), SE2.of(r.robot.true_pose())
         for _ in range(args.laps):
             errors: list[float] = []

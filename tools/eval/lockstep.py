@@ -9,10 +9,12 @@ the simulator's truth interface (``true_pose``) for the evaluator only.
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import math
 import tempfile
 import time
+import tomllib
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -34,10 +36,32 @@ from hal.sim.robot import SimRobot
 from hal.sim.scenario import Scenario
 from kernel.panorama import geometry_checksum
 from kernel.se2 import SE2
+from kernel.settings import as_dict, build
 from kernel.types import Frame
 
 # An evaluator's change to a raw frame before the localiser sees it (occlusion).
 FrameFilter = Callable[[np.ndarray], np.ndarray]
+
+
+def add_localisation_arguments(p: argparse.ArgumentParser) -> None:
+    """The options every localisation experiment takes (see localisation_settings)."""
+    p.add_argument("--sensor-model", choices=("assumed", "estimated", "ellipsoid"),
+                   default="ellipsoid")
+    p.add_argument("--particles", type=int, default=None)
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a [localisation] setting (repeatable)")
+
+
+def localisation_settings(default: LocalisationSettings, args: argparse.Namespace
+                          ) -> LocalisationSettings:
+    """The [localisation] settings with the experiment's overrides (``--set k=v``)."""
+    data = as_dict(default) | {"sensor_model": args.sensor_model, "seed": args.seed}
+    if args.particles:
+        data["particles"] = args.particles
+    for item in args.set:
+        key, _, value = item.partition("=")
+        data[key] = tomllib.loads(f"v = {value}")["v"]
+    return build(LocalisationSettings, data, "localisation")
 
 
 def lockstep_config(seed: int, scenario: str = "", world: str = "",
@@ -121,7 +145,8 @@ class Run:
 
     def learn(self, label: str = "") -> Place:
         """Turn Back and Look here with the daemon's loop; the place is stored with its
-        transition from the place learned before and handed to the localiser."""
+        transition from the place learned before and handed to the localiser, which
+        tracks from its reference, as in the daemon."""
         link: list[Link | None] = []
         truth: list[tuple[float, float, float]] = []
 
@@ -134,9 +159,7 @@ class Run:
         stored, added = self.mapper.add_place(
             Place(tbl.result(), tbl.reference_panorama, label=label), link[0])
         place = dataclasses.replace(stored, reference_panorama=None)
-        self.localiser.know_place(place)
-        for t in added[::2]:
-            self.localiser.know_transition(t)
+        self.localiser.place_learned(place, added)  # as the daemon does
         self.references[place.id] = SE2.of(truth[0])
         return place
 

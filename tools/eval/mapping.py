@@ -161,10 +161,7 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path
             stored, added = mapper.add_place(Place(tbl.result(), tbl.reference_panorama,
                                                    created_unix_s=time.time()), link[0])
             refs.append(ref)
-            localiser.watch_place(stored)  # as the daemon does after a learn job
-            for t in added[::2]:
-                localiser.know_transition(t)
-            localiser.set_pose(stored.id, (0.0, 0.0, 0.0), 0.03, 0.03)
+            localiser.place_learned(stored, added)  # as the daemon does after a learn job
             retry_at_m = None
             last_pose = robot.true_pose()
         places = mapper.graph.places

@@ -59,7 +59,6 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         graph = store.load()
     localiser = make_localiser(cfg, graph)
     reader = RecordingReader(args.recording)
-    pending: list[Any] = []  # odometry read ahead of the next frame
     frames: list[Any] = []
     odometry: list[Any] = []
     for msg in reader.messages([TOPIC_FRAMES, TOPIC_ODOMETRY]):
@@ -76,12 +75,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         frame = decode_frame(body)
         # The replay base runs up to ReplayClock.LOOKAHEAD_NS past the newest frame; the
         # daemon processes a frame once odometry has reached its stamp.
+        start = k
         while k < len(odometry) and odometry[k].stamp_ns <= frame.stamp_ns \
                 + ReplayClock.LOOKAHEAD_NS:
-            pending.append(odometry[k])
             k += 1
-        localiser.add_odometry(pending)
-        pending = []
+        localiser.add_odometry(odometry[start:k])
         t0 = time.perf_counter()
         belief = localiser.process_frame(frame)
         process_s.append(time.perf_counter() - t0)

@@ -21,35 +21,33 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
-import tomllib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from daemon.config import load
-from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.place import Place
 from hal.sim.world import load_world
-from kernel.settings import as_dict, build
 from tools.eval import plots
-from tools.eval.lockstep import Run, lockstep_config
+from tools.eval.lockstep import (
+    Run,
+    add_localisation_arguments,
+    localisation_settings,
+    lockstep_config,
+)
 
 DRAWS_PLOTS = True  # path (estimate, truth, odometry, particles), error per frame
 SNAPSHOT_FRAMES = (1, 30, 120)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--sensor-model", choices=("assumed", "estimated", "ellipsoid"),
-                   default="ellipsoid")
+    add_localisation_arguments(p)
     p.add_argument("--occlude-deg", type=float, default=0.0,
                    help="replace this many degrees of every view with noise")
     p.add_argument("--misassociate", type=int, default=0,
                    help="landmarks whose map bearing is 3-6 degrees off")
     p.add_argument("--crosses", type=int, default=2, help="times the cross is driven")
-    p.add_argument("--particles", type=int, default=None)
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a [localisation] setting (repeatable)")
 
 
 def occluder(width: int, height: int, cx: float, cy: float, degrees: float,
@@ -77,18 +75,6 @@ def misassociated(place: Place, count: int, rng: np.random.Generator) -> Place:
             math.remainder(lms[i].bearing + off, 2 * math.pi)))
     return dataclasses.replace(place, landmarks=dataclasses.replace(place.landmarks,
                                                                     landmarks=tuple(lms)))
-
-
-def localisation_settings(default: LocalisationSettings, args: argparse.Namespace
-                          ) -> LocalisationSettings:
-    """The [localisation] settings with the experiment's overrides (``--set k=v``)."""
-    data = as_dict(default) | {"sensor_model": args.sensor_model, "seed": args.seed}
-    if args.particles:
-        data["particles"] = args.particles
-    for item in args.set:
-        key, _, value = item.partition("=")
-        data[key] = tomllib.loads(f"v = {value}")["v"]
-    return build(LocalisationSettings, data, "localisation")
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
