@@ -14,8 +14,10 @@ import cv2
 import numpy as np
 import pytest
 
+from daemon.mapping.settings import OdometryNoiseSettings
+from daemon.service.mapper import Mapper
 from daemon.store.export import export_map, import_map
-from daemon.store.sqlite_store import MapStore
+from daemon.store.sqlite_store import SCHEMA_VERSION, MapStore
 from daemon.vision.drawing import LANDMARK_COLOUR
 from kernel.errors import MapStoreError
 from kernel.se2 import SE2, UncertainSE2
@@ -102,7 +104,8 @@ def _corrupt_btree(p: Path) -> None:
 
 def _newer_schema(p: Path) -> None:
     db = sqlite3.connect(p)
-    db.execute("UPDATE meta SET value = '3' WHERE key = 'schema_version'")
+    db.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'",
+               (str(SCHEMA_VERSION + 1),))
     db.commit()
     db.close()
 
@@ -124,7 +127,7 @@ def _random_bytes(p: Path) -> None:
     (_corrupt_place_bytes, GEOMETRY, "place 2 is damaged .*panorama"),
     (_corrupt_landmark_bytes, GEOMETRY, "place 2 is damaged"),
     (_corrupt_btree, GEOMETRY, "damaged|not a readable"),
-    (_newer_schema, GEOMETRY, "schema version 3.*upgrade placecell"),
+    (_newer_schema, GEOMETRY, f"schema version {SCHEMA_VERSION + 1}.*upgrade placecell"),
     (lambda p: None, "fff000", "another panorama geometry"),
     (_not_a_map, GEOMETRY, "not a placecell map .*without its meta table"),
     (_random_bytes, GEOMETRY, "not a placecell map .*not an SQLite file"),
@@ -159,10 +162,31 @@ def test_version_1_map_is_migrated(tmp_path: Path) -> None:
     db.commit()
     db.close()
     with MapStore.open(path, GEOMETRY) as store:
-        assert store.meta("schema_version") == "2"
+        assert store.meta("schema_version") == str(SCHEMA_VERSION)
         assert store.meta("created_unix_s") == "1700000000.0"
         stored = store.add_place(synthetic_place(np.random.default_rng(0)))
         assert store.place(stored.id).landmark_count == 16
+
+
+def test_version_2_map_keeps_its_places_and_gains_background_estimates(tmp_path: Path
+                                                                       ) -> None:
+    path = tmp_path / "v2.db"
+    _two_places(path).close()
+    db = sqlite3.connect(path)  # what a version 2 file holds: no background_estimate
+    db.execute("ALTER TABLE places DROP COLUMN background_estimate")
+    db.execute("UPDATE meta SET value = '2' WHERE key = 'schema_version'")
+    db.commit()
+    db.close()
+    with MapStore.open(path, GEOMETRY) as store:
+        assert store.meta("schema_version") == str(SCHEMA_VERSION)
+        before = store.load()
+        assert [p.label for p in before.places] == ["dock", "door"]
+        assert all(p.background_estimate is None for p in before.places)
+        assert store.transition_count() == 2
+        mapper = Mapper(store, OdometryNoiseSettings())  # the daemon's, at start
+        estimates = [p.background_estimate for p in store.load().places]
+        assert all(e is not None and -1.0 <= e <= 1.0 for e in estimates), estimates
+        assert [p.background_estimate for p in mapper.graph.places] == estimates
 
 
 def test_readers_are_not_blocked_by_the_writer(tmp_path: Path) -> None:

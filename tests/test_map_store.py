@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from daemon.store.sqlite_store import MapStore
+from daemon.store.sqlite_store import SCHEMA_VERSION, MapStore
 from kernel.errors import MapStoreError
 from kernel.panorama import geometry_checksum
 from kernel.sensor_settings import MirrorSettings, PanoramaSettings
@@ -17,7 +17,7 @@ def test_new_map_has_schema_wal_and_geometry(tmp_path: Path) -> None:
     path = tmp_path / "sub" / "map.db"
     with MapStore.open(path, "abc123") as store:
         assert store.place_count() == 0 and store.transition_count() == 0
-        assert store.meta("schema_version") == "2"
+        assert store.meta("schema_version") == str(SCHEMA_VERSION)
         assert store.meta("geometry_checksum") == "abc123"
     db = sqlite3.connect(path)
     assert db.execute("PRAGMA journal_mode").fetchone()[0] == "wal"

@@ -263,13 +263,37 @@ def format_pose(p: dict[str, Any]) -> str:
 
 def cmd_pose(args: argparse.Namespace) -> int:
     """The daemon's pose: the next one published, or every one with --follow."""
+    return _follow(args, "pose", format_pose, silence_ok=False)
+
+
+def format_event(e: dict[str, Any]) -> str:
+    fields = ", ".join(f"{k} {v}" for k, v in e.items() if k not in ("schema", "event",
+                                                                      "stamp_ns"))
+    return f"{e.get('event')}: {fields}" if fields else str(e.get("event"))
+
+
+def cmd_events(args: argparse.Namespace) -> int:
+    """The daemon's events (places learned, losses, relocalisations, faults...)."""
+    return _follow(args, "events", format_event, silence_ok=True)
+
+
+def cmd_relocalise(args: argparse.Namespace) -> int:
+    return _command(args, "cmd/relocalise", b"", lambda r: (
+        f"relocalising: searching {r.get('places')} places"))
+
+
+def _follow(args: argparse.Namespace, leaf: str, fmt: Callable[[dict[str, Any]], str],
+            silence_ok: bool) -> int:
+    """The next message on ``leaf``, or every one with --follow (--count, --duration);
+    --json prints one object per line. Nothing heard: "not reachable", unless
+    ``silence_ok`` (a quiet topic)."""
     session, robot = open_client(args)
-    key = zenoh_link.key(robot, "pose")
-    poses: queue.Queue[dict[str, Any]] = queue.Queue()
+    key = zenoh_link.key(robot, leaf)
+    messages: queue.Queue[dict[str, Any]] = queue.Queue()
 
     def on_sample(sample: Any) -> None:
         with contextlib.suppress(ValueError):  # not ours: ignored
-            poses.put(zenoh_link.decode(sample.payload.to_bytes()))
+            messages.put(zenoh_link.decode(sample.payload.to_bytes()))
 
     subscriber = session.declare_subscriber(key, on_sample)
     shown = 0
@@ -277,10 +301,11 @@ def cmd_pose(args: argparse.Namespace) -> int:
         deadline = time.monotonic() + (args.duration if args.follow else args.timeout)
         while time.monotonic() < deadline:
             try:
-                pose = poses.get(timeout=min(0.2, max(deadline - time.monotonic(), 0.01)))
+                message = messages.get(timeout=min(0.2, max(deadline - time.monotonic(),
+                                                             0.01)))
             except queue.Empty:
                 continue
-            print(json.dumps(pose, separators=(",", ":")) if args.json else format_pose(pose),
+            print(json.dumps(message, separators=(",", ":")) if args.json else fmt(message),
                   flush=True)
             shown += 1
             if not args.follow or (args.count and shown >= args.count):
@@ -290,7 +315,7 @@ def cmd_pose(args: argparse.Namespace) -> int:
     finally:
         subscriber.undeclare()
         session.close()
-    if shown == 0:
+    if shown == 0 and not silence_ok:
         return _unreachable(args, key)
     return EXIT_OK
 
@@ -368,6 +393,16 @@ def main(argv: list[str] | None = None) -> int:
                    help="with --follow: stop after this many seconds")
     p.add_argument("--json", action="store_true", help="one JSON object per line")
     p.set_defaults(func=cmd_pose)
+    p = sub.add_parser("events", help="the daemon's events (learned, lost, relocalised...)")
+    p.add_argument("--follow", action="store_true", help="every event as it is published")
+    p.add_argument("--count", type=int, default=0, help="with --follow: stop after this many")
+    p.add_argument("--duration", type=float, default=1e9,
+                   help="with --follow: stop after this many seconds")
+    p.add_argument("--json", action="store_true", help="one JSON object per line")
+    p.set_defaults(func=cmd_events)
+    p = sub.add_parser("relocalise", help="forget the pose and search the whole map")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_relocalise)
     p = sub.add_parser("places", help="the places of the daemon's map")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_places)

@@ -22,6 +22,17 @@ class PlaceScore:
 
 
 @dataclass(frozen=True)
+class LocalisationEvent:
+    """A loss declared, or the pose found again (published on ``events``, design §9)."""
+
+    kind: Literal["lost", "relocalised"]
+    place_id: int | None  # lost: the place the estimate was in; relocalised: found in
+    how: str  # lost: why; relocalised: "local" | "place" | "global" (the recovery step)
+    took_s: float = 0.0  # relocalised: from the loss (or the search's start), by stamps
+    frames: int = 0  # ...and in frames
+
+
+@dataclass(frozen=True)
 class Belief:
     stamp_ns: int
     state: BeliefState
@@ -42,3 +53,4 @@ class Belief:
     recent_place_lrp: float | None = None  # ...its LRP in this frame
     acquisition: AcquisitionDecision | None = None  # learn a new place here (design §6)
     backgrounds: tuple[tuple[int, float], ...] = ()  # (place, background LRP) measured now
+    event: LocalisationEvent | None = None  # a loss or a relocalisation in this frame

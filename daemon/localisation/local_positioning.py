@@ -105,15 +105,42 @@ class PlaceTracker:
         radius = self.settings.search_cols + int(math.ceil(spread * self.width
                                                            / (2 * math.pi)))
         found = self._track(grey, predicted, min(radius, self.width // 2 - TEMPLATE))
-        bearings = column_to_bearing_of_centre(found.cols, self.width)
         # Rows follow the landmarks (their elevation changes with distance) while tracked.
         self.rows = np.where(found.scores >= self.settings.min_ncc, found.rows, self.rows)
-        weights = ncc_weights(found.scores, self.settings.min_ncc) * self._scale_kept(predicted)
+        return self._weigh(found, self._scale_kept(predicted))  # step 3
+
+    def start_anywhere(self, grey: np.ndarray, radius_m: float) -> LocalResult:
+        """Position in the place from nothing (§9.3.2 recovery over the whole place, and
+        global relocalisation's pick): particles over ``radius_m`` around the reference,
+        each turned to the orientation on which its position and the landmarks' bearings
+        (searched over the whole panorama) agree — eq. 8.34 per particle, with the
+        landmarks' positions instead of the reference bearings — then weighed by this
+        frame's observation, so the estimate is this frame's posterior."""
+        s = self.settings
+        found = self._track(grey, (0.0, 0.0, 0.0), radius=self.width // 2 - TEMPLATE)
+        bearings = column_to_bearing_of_centre(found.cols, self.width)
+        f = self.filter
+        f.initialise((0.0, 0.0, 0.0), radius_m, math.pi)
+        good = found.scores >= s.orientation_ncc
+        if good.sum() >= 3:
+            mean = self.geometry.mean[good]
+            towards = np.arctan2(mean[None, :, 1] - f.particles[:, 1:2],
+                                 mean[None, :, 0] - f.particles[:, 0:1])
+            f.particles[:, 2] = _robust_circular_mean(towards - bearings[None, good])
+            f.particles[:, 2] += f.rng.normal(0.0, math.radians(2.0), len(f.particles))
+        return self._weigh(found, np.ones(len(bearings)))
+
+    def _weigh(self, found: Track, kept: np.ndarray) -> LocalResult:
+        """Weigh the particles with this frame's tracked landmarks (``kept``: 1 for the
+        landmarks to use) and take the estimate and its confidence."""
+        f = self.filter
+        bearings = column_to_bearing_of_centre(found.cols, self.width)
+        weights = ncc_weights(found.scores, self.settings.min_ncc) * kept
         sigma_bearing = math.radians(self.settings.bearing_sigma_deg) * (
             1.0 + 10.0 * (1.0 - np.clip(found.scores, 0.0, 1.0)))
         if self.settings.consensus_sigma_deg > 0:
             weights = weights * self._consensus(bearings, weights)
-        likelihood = self.model(f.particles, bearings, sigma_bearing, self.geometry)  # step 3
+        likelihood = self.model(f.particles, bearings, sigma_bearing, self.geometry)
         f.weigh(combine(likelihood, weights, self.settings.outlier_floor))
         self.estimate = f.estimate()
         at_estimate = self.model(np.array([self.estimate.pose]), bearings, sigma_bearing,
@@ -171,3 +198,14 @@ class PlaceTracker:
                          for b, d in zip(g.bearing, g.depth, strict=True)])
         return track(grey, self.margin, self.templates, cols, self.rows, radius,
                      self.settings.search_rows)
+
+
+def _robust_circular_mean(angles: np.ndarray, tolerance: float = math.radians(10.0)
+                          ) -> np.ndarray:
+    """(N,) per row of (N, M) angles: the circular mean, then the mean again of those
+    within ``tolerance`` of it (a mis-associated landmark moves it little)."""
+    first = np.arctan2(np.sin(angles).mean(axis=1), np.cos(angles).mean(axis=1))
+    near = np.abs(np.asarray(wrap_angle(angles - first[:, None]))) <= tolerance
+    sin = np.where(near, np.sin(angles), 0.0).sum(axis=1)
+    cos = np.where(near, np.cos(angles), 0.0).sum(axis=1)
+    return np.where(near.any(axis=1), np.arctan2(sin, cos), first)

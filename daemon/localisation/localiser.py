@@ -8,6 +8,15 @@ estimate on or close a cycle (daemon/localisation/place_switching.py); autonomou
 acquisition watches the place learned last (daemon/mapping/acquisition.py). The grey
 panorama and its preparation for matching are computed once per frame and shared.
 
+Global localisation (design §9, daemon/localisation/global_localisation.py): with no pose
+the map is searched for the most likely place and tracking starts there; a loss (the
+confidence low for a few frames) is recovered from in the order of §9.3.2 — particles
+redistributed around the estimate, over the whole place, then global relocalisation —
+and a place clearly ahead of the current one in the background search sends recovery
+straight to the last step. States: ``uninitialised`` (no map), ``relocalising`` (searching,
+or tracking from a place the search chose until the estimate is reliable), ``tracking``,
+``lost`` (recovering).
+
 It is pure: the caller hands in frames and odometry samples with their stamps; nothing
 here reads a clock (``perf_counter`` only times the steps) or a device, and the random
 generator is seeded from the settings.
@@ -20,10 +29,12 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
-from daemon.localisation.belief import Belief, BeliefState, PlaceScore
+from daemon.localisation.belief import Belief, BeliefState, LocalisationEvent, PlaceScore
+from daemon.localisation.global_localisation import LossDetector, PlaceSearch
 from daemon.localisation.local_positioning import LocalResult, PlaceTracker
 from daemon.localisation.odometry import OdometryBuffer, relative_motion
 from daemon.localisation.place_switching import CycleClosure, PlaceSwitcher, reliable
@@ -54,6 +65,11 @@ class KnownPlace:
     place: Place  # without its reference panorama
     templates: PreparedTemplates
     background: float | None
+
+
+# What the localiser is doing (design §9).
+Mode = Literal["search", "confirm", "track", "recover"]
+RECOVERY_STEPS = {1: "local", 2: "place"}  # §9.3.2; step 3 is the global search
 
 
 @dataclass(frozen=True)
@@ -99,6 +115,13 @@ class Localiser:
         self._pose_request: PoseRequest | None = None
         self._closure: CycleClosure | None = None
         self._frames = 0
+        self.mode: Mode = "search"
+        self.search = PlaceSearch(self.settings)
+        self.loss = LossDetector(self.settings)
+        self._relocalise_requested = False
+        self._step = 0  # the recovery step under way (mode "recover")
+        self._mode_frames = 0  # frames in this mode or recovery step
+        self._episode: tuple[int, int] | None = None  # (stamp, frame) the loss or search began
 
     # ------------------------------------------------------------------ the map
     def know_place(self, place: Place) -> None:
@@ -148,6 +171,11 @@ class Localiser:
             s.initial_sigma_xy_m if sigma_xy is None else float(sigma_xy),
             s.initial_sigma_yaw_rad if sigma_yaw is None else float(sigma_yaw))
 
+    def relocalise(self) -> None:
+        """Forget the pose and search the whole map from the next frame on (cmd/relocalise).
+        Safe to call from another thread."""
+        self._relocalise_requested = True
+
     def reliable_estimate(self) -> tuple[int, UncertainSE2] | None:
         """(place, T_place_robot) when the current estimate is reliable (σ_xy and
         confidence as for closing a cycle), else None. Safe to call from another thread."""
@@ -194,10 +222,16 @@ class Localiser:
             local = self.tracker.update(grey, motion, dt_s)
         timings["positioning"] = (time.perf_counter() - t1) * 1e3
         t2 = time.perf_counter()
+        mode = self.mode
+        searched, event = self._supervise(prepare, grey, local, frame.stamp_ns)
+        timings["search"] = (time.perf_counter() - t2) * 1e3
+        t2 = time.perf_counter()
         scores: tuple[PlaceScore, ...] = ()
         switched_from, closed = None, None
-        if self.tracker is not None and self._frames % self.settings.recognise_every == 0:
+        if self.tracker is not None and self.mode == mode and mode in ("track", "confirm") \
+                and self._frames % self.settings.recognise_every == 0:
             scores, switched_from = self._recognise(prepare(), grey, odo)
+        scores = _merged(scores, searched)
         if self._closure is not None and local is not None and self.tracker is not None \
                 and self.tracker.place.id == self._closure.to_id:
             closed = self._observe_closure(local)
@@ -208,7 +242,7 @@ class Localiser:
         timings["total"] = (time.perf_counter() - t0) * 1e3
         return self._belief(frame.stamp_ns, odo is not None, motion, local, scores,
                             switched_from, closed, recent, recent_lrp, decision, background,
-                            {k: round(v, 3) for k, v in timings.items()})
+                            {k: round(v, 3) for k, v in timings.items()}, event)
 
     def recognise(self, frame: Frame, place_ids: list[int]) -> tuple[PlaceScore, ...]:
         """Each place's LRP in ``frame`` and its lead over the place's background (§9.2),
@@ -218,11 +252,144 @@ class Localiser:
         return tuple(self._score(prepared, pid) for pid in place_ids)
 
     def _score(self, prepared: PreparedPanorama, place_id: int) -> PlaceScore:
-        known = self._known[place_id]
-        lrp = self.matcher.lrp(prepared, known.templates)
-        background = self.settings.background_lrp if known.background is None \
-            else known.background
-        return PlaceScore(place_id, lrp, lrp - background)
+        return self._score_many(prepared, [place_id])[0]
+
+    def _score_many(self, prepared: PreparedPanorama, place_ids: list[int]
+                    ) -> list[PlaceScore]:
+        """LRP and lead over the background (§9.2) of each place, in one matching pass."""
+        known = [self._known[p] for p in place_ids]
+        lrps = self.matcher.lrps(prepared, [k.templates for k in known])
+        return [PlaceScore(p, lrp, lrp - self._background(k))
+                for p, k, lrp in zip(place_ids, known, lrps, strict=True)]
+
+    def _background(self, known: KnownPlace) -> float:
+        """The place's background LRP: measured, else estimated when it was learned,
+        else the default (§7.1, design §9)."""
+        if known.background is not None:
+            return known.background
+        estimate = known.place.background_estimate
+        return self.settings.background_lrp if estimate is None else estimate
+
+    # ------------------------------------------------------------------ global (§9)
+    def _supervise(self, prepare: Callable[[], PreparedPanorama], grey: np.ndarray,
+                   local: LocalResult | None, stamp_ns: int
+                   ) -> tuple[list[PlaceScore], LocalisationEvent | None]:
+        """Search, loss detection and recovery for this frame (module docstring): the
+        places recognised by the search, and the event this frame brings, if any."""
+        places = list(self._known)
+        if self._relocalise_requested:
+            self._relocalise_requested = False
+            self._begin_search(stamp_ns)
+        if not places:
+            return [], None
+        if self.mode == "search":
+            if self._episode is None:
+                self._episode = (stamp_ns, self._frames)
+            first = (self.tracker.place.id,) if self.tracker is not None else ()
+            found_in = self._search_step(prepare, places, first)
+            best = self.search.best(places)
+            if best is not None:
+                self._start_in(grey, best.place_id)
+            return found_in, None
+        if local is None or self.tracker is None:
+            return [], None  # a tracker started this frame
+        current = self.tracker.place.id
+        lost_now = self.loss.observe(local.confidence)
+        self._mode_frames += 1
+        scored: list[PlaceScore] = []
+        if self.mode != "confirm" and (self.loss.suspicious or self.mode == "recover"):
+            if not self.search.running:
+                self.search.reset(stamp_ns)
+            scored = self._search_step(prepare, places, (current, *self._links.get(current, {})))
+        elif self.mode == "track":
+            self.search.reset(None)  # confident again: no background search
+        found = self._recovered(local)
+        if self.mode == "track":
+            if not lost_now:
+                return scored, None
+            self._episode = (stamp_ns, self._frames)
+            event = LocalisationEvent("lost", current, f"confidence below "
+                                      f"{self.settings.loss_confidence} for "
+                                      f"{self.settings.loss_frames} frames")
+            leader = self.search.leader_over(current, places)
+            if leader is not None:
+                self._start_in(grey, leader.place_id)
+            else:
+                self._recover(grey, 1)
+            return scored, event
+        if self.mode == "confirm":
+            if found:
+                return scored, self._relocalised(current, "global", stamp_ns)
+            if self._mode_frames >= self.settings.confirm_frames or lost_now:
+                self._begin_search(stamp_ns, rejected={current}, keep_episode=True)
+            return scored, None
+        # mode "recover": steps 1 and 2 of §9.3.2
+        if found:
+            return scored, self._relocalised(current, RECOVERY_STEPS[self._step], stamp_ns)
+        leader = self.search.leader_over(current, places)
+        if leader is not None:
+            self._start_in(grey, leader.place_id)
+        elif self._mode_frames >= self.settings.recovery_frames:
+            if self._step == 1:
+                self._recover(grey, 2)
+            else:  # step 3: the most likely place elsewhere, or search on without this one
+                best = self.search.best([p for p in places if p != current])
+                if best is not None and best.place_id != current:
+                    self._start_in(grey, best.place_id)
+                else:
+                    self._begin_search(stamp_ns, rejected={current}, keep_episode=True)
+        return scored, None
+
+    def _search_step(self, prepare: Callable[[], PreparedPanorama], places: list[int],
+                     first: tuple[int, ...]) -> list[PlaceScore]:
+        scored = self._score_many(prepare(), self.search.to_score(places, first))
+        self.search.observe(scored)
+        return scored
+
+    def _recovered(self, local: LocalResult) -> bool:
+        return local.confidence >= self.settings.loss_confidence and reliable(
+            local.estimate.covariance, local.confidence, self.settings)
+
+    def _begin_search(self, stamp_ns: int, rejected: set[int] | None = None,
+                      keep_episode: bool = False) -> None:
+        self.mode, self._mode_frames = "search", 0
+        self.search.reset(stamp_ns, rejected)
+        self.loss.reset()
+        if not keep_episode or self._episode is None:
+            self._episode = (stamp_ns, self._frames)
+
+    def _start_in(self, grey: np.ndarray, place_id: int) -> None:
+        """Global relocalisation's pick: particles over ``recovery_sigma_m`` around the
+        place's reference, the orientation from the bearings (§9.3.2, eq. 8.34)."""
+        tracker = PlaceTracker(self._known[place_id].place, self.settings, self.model,
+                               self.rng)
+        tracker.start_anywhere(grey, self.settings.recovery_sigma_m)
+        self.tracker, self._closure = tracker, None
+        self.mode, self._mode_frames = "confirm", 0
+        self.loss.reset()
+
+    def _recover(self, grey: np.ndarray, step: int) -> None:
+        """§9.3.2 step 1: the particles around the estimate (σ recovery_local_sigma_m);
+        step 2: over the whole place (σ recovery_sigma_m around its reference)."""
+        assert self.tracker is not None and self.tracker.estimate is not None
+        s = self.settings
+        if step == 1:
+            r = s.recovery_local_sigma_m
+            self.tracker.move_to(self.tracker.estimate.pose, np.diag([r * r, r * r, r * r]))
+        else:
+            self.tracker.start_anywhere(grey, s.recovery_sigma_m)
+        self.mode, self._step, self._mode_frames = "recover", step, 0
+        self.loss.reset()
+
+    def _relocalised(self, place_id: int, how: str, stamp_ns: int) -> LocalisationEvent:
+        began_ns, began_frame = self._episode or (stamp_ns, self._frames)
+        self._episode = None
+        self.mode, self._mode_frames = "track", 0
+        self.loss.reset()
+        self.search.reset(None)
+        return LocalisationEvent("relocalised", place_id, how,
+                                 max(0.0, (stamp_ns - began_ns) / 1e9),
+                                 self._frames - began_frame)
 
     def _apply_pose_request(self, grey: np.ndarray, odo: Odometry | None) -> bool:
         request, self._pose_request = self._pose_request, None
@@ -232,6 +399,9 @@ class Localiser:
                                     self.model, self.rng)
         self.tracker.start(grey, request.pose, request.sigma_xy, request.sigma_yaw)
         self._closure = None
+        self.mode, self._mode_frames, self._episode = "track", 0, None  # the operator knows
+        self.loss.reset()
+        self.search.reset(None)
         return True
 
     def _recognise(self, prepared: PreparedPanorama, grey: np.ndarray, odo: Odometry | None
@@ -300,32 +470,45 @@ class Localiser:
                 scores: tuple[PlaceScore, ...], switched_from: int | None,
                 closed: Transition | None, recent: int | None, recent_lrp: float | None,
                 decision: AcquisitionDecision | None,
-                background: tuple[tuple[int, float], ...], timings: dict[str, float]
-                ) -> Belief:
+                background: tuple[tuple[int, float], ...], timings: dict[str, float],
+                event: LocalisationEvent | None) -> Belief:
         common = dict(stamp_ns=stamp_ns, odometry_ok=odometry_ok, motion_since_last=motion,
                       scores=scores, timings_ms=timings, recent_place=recent,
                       recent_place_lrp=recent_lrp, acquisition=decision,
                       backgrounds=background, switched_from=switched_from,
                       closed_transition=closed)
+        no_odometry = "" if odometry_ok else \
+            "; no odometry at this frame (base silent): motion unknown"
         tracker = self.tracker
-        if tracker is None or tracker.estimate is None:
-            reason = "the map has no places yet" if self.places == 0 else (
-                f"no pose set in the map's {self.places} places (cmd/set_pose); global "
-                "relocalisation is not built yet")
-            if not odometry_ok:
-                reason += "; no odometry at this frame (base silent): motion unknown"
-            state: BeliefState = "uninitialised"
-            return Belief(state=state, reason=reason, **common)  # type: ignore[arg-type]
+        if not self._known:
+            return Belief(state="uninitialised", reason="the map has no places yet"
+                          + no_odometry, **common)  # type: ignore[arg-type]
+        if self.mode == "search" or tracker is None or tracker.estimate is None:
+            n = len(self._known)
+            done = sum(p in self.search.scores for p in self._known)
+            best = self.search.ranked()[:1]
+            reason = f"global relocalisation: {done} of {n} places recognised" + (
+                f", most likely {best[0].place_id} (lead {best[0].lead:.3f})" if best else "")
+            return Belief(state="relocalising", reason=reason + no_odometry, event=event,
+                          **common)  # type: ignore[arg-type]
         est = tracker.estimate
         confidence = 1.0 if local is None else local.confidence
-        reason = f"tracking in place {tracker.place.id}"
-        if not odometry_ok:
-            reason += "; no odometry at this frame (base silent): motion unknown"
-        return Belief(state="tracking", reason=reason, place_id=tracker.place.id,
+        place = tracker.place.id
+        state: BeliefState = "tracking"
+        reason = f"tracking in place {place}"
+        if self.mode == "confirm":
+            state, reason = "relocalising", (f"global relocalisation chose place {place}; "
+                                             "waiting for a reliable estimate")
+        elif self.mode == "recover":
+            state = "lost"
+            reason = (f"lost in place {place}: recovery step {self._step} of 3 ("
+                      + ("particles around the estimate" if self._step == 1
+                         else "particles over the whole place") + ")")
+        return Belief(state=state, reason=reason + no_odometry, place_id=place,
                       place_label=tracker.place.label, pose_in_place=est.pose,
                       covariance=tuple(float(v) for v in est.covariance.ravel()),
                       confidence=confidence, particles=len(tracker.filter.particles),
-                      **common)  # type: ignore[arg-type]
+                      event=event, **common)  # type: ignore[arg-type]
 
     def _acquire(self, prepare: Callable[[], PreparedPanorama], odo: Odometry | None
                  ) -> tuple[
@@ -399,3 +582,12 @@ class Localiser:
             if lead >= best:
                 best, best_id = lead, pid
         return best_id
+
+
+def _merged(*groups: tuple[PlaceScore, ...] | list[PlaceScore]) -> tuple[PlaceScore, ...]:
+    """Scores from several steps of one frame, one per place (the first kept)."""
+    out: dict[int, PlaceScore] = {}
+    for group in groups:
+        for sc in group:
+            out.setdefault(sc.place_id, sc)
+    return tuple(out.values())

@@ -1,4 +1,5 @@
-"""Settings of local positioning (``[localisation]``, design §7-8, thesis §8.1-8.2)."""
+"""Settings of local positioning and global localisation (``[localisation]``, design
+§7-9, thesis §8.1-8.2, §9)."""
 
 from __future__ import annotations
 
@@ -102,6 +103,28 @@ class LocalisationSettings:
                                       "reference (§9.3.2)")
     background_lrp: float = setting(0.7, ge=0.0, le=1.0,
                                     doc="a place's background LRP until it is measured")
+    loss_confidence: float = setting(0.6, ge=0.0, le=1.0, doc="a frame whose confidence "
+                                     "(the raw sensor-model output at the estimate) is "
+                                     "below this counts towards a loss (§9.3.1)...")
+    loss_frames: int = setting(5, ge=1, le=1000, doc="...and this many in a row are one")
+    recovery_local_sigma_m: float = setting(0.2, gt=0.0, le=5.0, doc="recovery step 1: "
+                                            "particles redistributed this far around the "
+                                            "estimate (§9.3.2)")
+    recovery_frames: int = setting(3, ge=1, le=1000, doc="frames each recovery step is "
+                                   "given to become reliable before the next is tried")
+    confirm_frames: int = setting(15, ge=1, le=10_000, doc="a place chosen by global "
+                                  "relocalisation must give a reliable estimate within "
+                                  "this many frames, or the search goes on without it")
+    search_places_per_frame: int = setting(25, ge=1, le=100_000, doc="places recognised "
+                                           "per frame while searching (a frame's budget; "
+                                           "the rest on later frames, §9.4.2)")
+    search_min_lead: float = setting(0.03, ge=-1.0, le=1.0, doc="global relocalisation "
+                                     "picks the most likely place once every place has "
+                                     "been recognised and its LRP minus background is at "
+                                     "least this (§9.2)")
+    search_margin: float = setting(0.05, ge=0.0, le=1.0, doc="lost: a place leading the "
+                                   "current one by this goes straight to global "
+                                   "relocalisation (the robot was carried off)")
 
     def __post_init__(self) -> None:
         if len(self.initial_pose) != 3:

@@ -55,6 +55,11 @@ class AbortRequest:
 
 
 @dataclass(frozen=True)
+class RelocaliseRequest:
+    """cmd/relocalise: forget the pose and search the whole map (design §9)."""
+
+
+@dataclass(frozen=True)
 class SetPoseRequest:
     """cmd/set_pose: start tracking at (x, y, yaw) in a place's frame (design §7)."""
 

@@ -133,6 +133,7 @@ class Daemon:
                               ("cmd/learn_place", self._answer_learn),
                               ("cmd/abort", self._answer_abort),
                               ("cmd/set_pose", self._answer_set_pose),
+                              ("cmd/relocalise", self._answer_relocalise),
                               ("map/places", self._answer_places),
                               ("map/transitions", self._answer_transitions)):
             self._queryables.append(s.declare_queryable(
@@ -292,6 +293,21 @@ class Daemon:
         query.reply(query.key_expr, api.result(place=request.place, x=request.x, y=request.y,
                                                yaw=request.yaw))
 
+    def _answer_relocalise(self, query: zenoh.Query) -> None:
+        """cmd/relocalise: search the whole map for the robot (design §9)."""
+        api.parse(api.RelocaliseRequest, _payload(query), "relocalise")
+        localiser = self.processing.localiser
+        if localiser is None:
+            why = self.supervisor.health["processing"].last_error or "starting"
+            raise api.RequestError(api.ErrorCode.REFUSED, f"the localiser is not running: {why}")
+        if self.mapper.place_count() == 0:
+            raise api.RequestError(api.ErrorCode.REFUSED, "the map has no places to "
+                                   "relocalise in")
+        localiser.relocalise()
+        log.info("relocalisation requested")
+        query.reply(query.key_expr, api.result(relocalising=True,
+                                               places=self.mapper.place_count()))
+
     # ------------------------------------------------------------------ map
     def _answer_places(self, query: zenoh.Query) -> None:
         places = [{"id": p.id, "label": p.label, "created_unix_s": p.created_unix_s,
@@ -329,6 +345,12 @@ class Daemon:
         self.publish("belief", zenoh_link.encode("placecell.belief", body))
         if belief.closed_transition is not None:
             self._store_cycle(belief.closed_transition)
+        event = belief.event
+        if event is not None and event.kind == "lost":
+            self.publish_event("lost", place=event.place_id, reason=event.how)
+        elif event is not None:
+            self.publish_event("relocalised", place=event.place_id, how=event.how,
+                               took_s=round(event.took_s, 3), frames=event.frames)
         try:
             self._maybe_acquire(belief)
         except PlacecellError as e:  # the map file refused: say so, keep localising

@@ -35,10 +35,10 @@ from kernel.se2 import SE2, UncertainSE2
 
 log = logging.getLogger(__name__)
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 APPLICATION = "placecell-map"
 
-_SCHEMA_V2 = """
+_SCHEMA = """
 CREATE TABLE meta (
     key   TEXT PRIMARY KEY,
     value TEXT NOT NULL
@@ -48,6 +48,7 @@ CREATE TABLE places (
     label          TEXT NOT NULL DEFAULT '',
     created_unix_s REAL NOT NULL,
     background_lrp REAL,
+    background_estimate REAL,           -- v3: from the reference panorama, NULL if not made
     landmark_count INTEGER NOT NULL,
     landmarks      BLOB NOT NULL,       -- daemon/store/codec.py
     panorama       BLOB NOT NULL,       -- reference panorama, lossless PNG
@@ -68,7 +69,7 @@ CREATE INDEX transitions_to ON transitions(to_id);
 
 
 _PLACE_COLUMNS = ("id, label, created_unix_s, background_lrp, landmarks, local_space, "
-                  "digest")
+                  "digest, background_estimate")
 
 
 @dataclass(frozen=True)
@@ -135,7 +136,7 @@ class MapStore:
             db.execute("PRAGMA journal_mode=WAL")
             db.execute("PRAGMA foreign_keys=ON")
             with _transaction(db):
-                _create_v2(db)
+                _create_tables(db)
                 db.executemany("INSERT INTO meta(key, value) VALUES (?, ?)", [
                     ("application", APPLICATION),
                     ("schema_version", str(SCHEMA_VERSION)),
@@ -206,7 +207,7 @@ class MapStore:
         return TopologicalMap(places, self.transitions())
 
     def _decode_place(self, row: Sequence[Any]) -> Place:
-        pid, label, created, background, lm_blob, ls_blob, stored = row
+        pid, label, created, background, lm_blob, ls_blob, stored, estimate = row
         where = f"{self.path}: place {pid}"
         if codec.digest(lm_blob, ls_blob) != stored:
             raise MapStoreError(f"{where} is damaged (its bytes do not match their digest)")
@@ -214,6 +215,7 @@ class MapStore:
         try:
             return Place(landmarks, None, label=str(label), created_unix_s=float(created),
                          background_lrp=None if background is None else float(background),
+                         background_estimate=None if estimate is None else float(estimate),
                          local_space=codec.decode_vector(ls_blob), id=int(pid))
         except ValueError as e:
             raise MapStoreError(f"{where}: {e}") from e
@@ -256,6 +258,12 @@ class MapStore:
             self._db.execute("UPDATE places SET background_lrp = ? WHERE id = ?",
                              (float(background_lrp), place_id))
 
+    def set_background_estimate(self, place_id: int, estimate: float) -> None:
+        self._writable()
+        with self._lock, _transaction(self._db):
+            self._db.execute("UPDATE places SET background_estimate = ? WHERE id = ?",
+                             (float(estimate), place_id))
+
     def _insert_place(self, place: Place, keep_id: bool) -> int:
         if place.reference_panorama is None:
             raise MapStoreError("a place is stored with its reference panorama")
@@ -263,12 +271,12 @@ class MapStore:
         pano = codec.encode_image(place.reference_panorama)
         ls = codec.encode_vector(place.local_space)
         cur = self._db.execute(
-            "INSERT INTO places(id, label, created_unix_s, background_lrp, landmark_count, "
-            "landmarks, panorama, local_space, digest, panorama_digest) "
-            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            "INSERT INTO places(id, label, created_unix_s, background_lrp, "
+            "background_estimate, landmark_count, landmarks, panorama, local_space, digest, "
+            "panorama_digest) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             (place.id if keep_id else None, place.label, place.created_unix_s,
-             place.background_lrp, place.landmark_count, lm, pano, ls,
-             codec.digest(lm, ls), codec.digest(pano)))
+             place.background_lrp, place.background_estimate, place.landmark_count, lm, pano,
+             ls, codec.digest(lm, ls), codec.digest(pano)))
         return int(cur.lastrowid or 0)
 
     def _put_transition(self, t: Transition) -> None:
@@ -375,21 +383,27 @@ def _inspect(p: Path, geometry_checksum: str | None) -> int:
         db.close()
 
 
-def _create_v2(db: sqlite3.Connection) -> None:
-    for statement in _SCHEMA_V2.split(";"):
+def _create_tables(db: sqlite3.Connection) -> None:
+    for statement in _SCHEMA.split(";"):
         if statement.strip():
             db.execute(statement)
 
 
 def _migrate(db: sqlite3.Connection, p: Path, version: int) -> None:
-    """Version 1 (meta, empty places and transitions tables) to 2, in one transaction."""
+    """To the current version, in one transaction: 1 (meta, empty places and transitions
+    tables) is rebuilt; 2 gains places.background_estimate (NULL: the daemon's mapper
+    makes it from the stored reference panoramas)."""
     with _transaction(db):
+        if version == 2:
+            db.execute("ALTER TABLE places ADD COLUMN background_estimate REAL")
+            db.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'",
+                       (str(SCHEMA_VERSION),))
         if version == 1:
             meta = db.execute("SELECT key, value FROM meta").fetchall()
             db.execute("DROP TABLE IF EXISTS transitions")
             db.execute("DROP TABLE IF EXISTS places")
             db.execute("DROP TABLE meta")
-            _create_v2(db)
+            _create_tables(db)
             db.executemany("INSERT INTO meta(key, value) VALUES (?, ?)", meta)
             db.execute("INSERT OR REPLACE INTO meta(key, value) VALUES ('application', ?)",
                        (APPLICATION,))

@@ -139,6 +139,12 @@ class PreparedTemplates:
         return cls(t, norms, np.ascontiguousarray(small, dtype=np.float32),
                    detail.astype(np.float32))
 
+    @classmethod
+    def joined(cls, parts: list[PreparedTemplates]) -> PreparedTemplates:
+        """Many places' templates as one set."""
+        return cls(*(np.concatenate([getattr(p, f) for p in parts])
+                     for f in ("zero_mean", "norms", "coarse", "detail")))
+
 
 class FastMatcher:
     """Best NCC of many templates in one panorama, coarse to fine (module docstring)."""
@@ -173,6 +179,15 @@ class FastMatcher:
 
     def lrp(self, pano: PreparedPanorama, templates: PreparedTemplates) -> float:
         return float(self.best_ncc(pano, templates).mean())
+
+    def lrps(self, pano: PreparedPanorama, places: list[PreparedTemplates]) -> list[float]:
+        """The LRP of each of many places: one coarse matrix product for all their
+        templates (a global search scores dozens of places in one frame)."""
+        if not places:
+            return []
+        best = self.best_ncc(pano, PreparedTemplates.joined(places))
+        ends = np.cumsum([len(p.norms) for p in places])
+        return [float(part.mean()) for part in np.split(best, ends[:-1])]
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)

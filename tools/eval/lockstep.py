@@ -29,6 +29,7 @@ from daemon.mapping.place import Place
 from daemon.mapping.tbl import cross_legs
 from daemon.service.learning import DeviceSensors, drive_tbl
 from daemon.service.mapper import Link, Mapper
+from daemon.service.pipeline import make_localiser
 from daemon.store.sqlite_store import MapStore
 from hal.registry import HalContext, create_base, create_camera
 from hal.sim.factory import build_sim_robot
@@ -162,6 +163,13 @@ class Run:
         self.localiser.place_learned(place, added)  # as the daemon does
         self.references[place.id] = SE2.of(truth[0])
         return place
+
+    def restart_localiser(self) -> Localiser:
+        """A new Localiser on the map as stored, as the daemon builds one when it starts:
+        no pose, so it localises globally (design §9)."""
+        with self.mapper.lock:
+            self.localiser = make_localiser(self.cfg, self.mapper.graph)
+        return self.localiser
 
     # ------------------------------------------------------------------ truth
     def truth_in(self, place_id: int) -> SE2:

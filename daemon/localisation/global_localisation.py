@@ -1,0 +1,123 @@
+"""Global localisation: the search for the most likely place, and loss detection (design
+§9; thesis §9.2-9.4).
+
+:class:`PlaceSearch` recognises the map's places a frame's budget at a time (every place
+not yet recognised in this search first, then the best so far again) and names the most
+likely place — the highest LRP minus background, §9.2 — once every place has been
+recognised since the search began (nothing is dropped for good). :class:`LossDetector`
+declares a loss when the confidence (the raw sensor-model output at the estimate) stays
+below a threshold for a number of frames in a row (§9.3.1). The recovery that follows,
+in the order of §9.3.2, is the localiser's (daemon/localisation/localiser.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from daemon.localisation.belief import PlaceScore
+from daemon.localisation.settings import LocalisationSettings
+
+
+@dataclass(frozen=True)
+class Candidate:
+    place_id: int
+    lead: float  # LRP minus background when last recognised
+    frame: int  # the search frame it was recognised in
+
+
+class PlaceSearch:
+    """The most likely place over the whole map, a budget of places per frame."""
+
+    def __init__(self, settings: LocalisationSettings) -> None:
+        self.settings = settings
+        self.scores: dict[int, Candidate] = {}
+        self.frames = 0
+        self.started_ns: int | None = None
+        self.rejected: set[int] = set()  # tried and not confirmed in this search
+        self._turn = 0
+
+    def reset(self, stamp_ns: int | None = None, rejected: set[int] | None = None) -> None:
+        """A new search from the frame at ``stamp_ns`` on; places in ``rejected`` are
+        chosen only when no other place qualifies (they stay recognised and reported)."""
+        self.scores.clear()
+        self.frames = 0
+        self.started_ns = stamp_ns
+        self.rejected = set(rejected or ())
+
+    @property
+    def running(self) -> bool:
+        return self.started_ns is not None
+
+    def to_score(self, places: list[int], first: tuple[int, ...] = ()) -> list[int]:
+        """The places to recognise in this frame, at most ``search_places_per_frame``:
+        ``first`` (e.g. the current place and its neighbours), then every place not yet
+        recognised in this search, in turn, then the best so far again."""
+        budget = self.settings.search_places_per_frame
+        known = set(places)
+        chosen = [p for p in dict.fromkeys(first) if p in known][:budget]
+        unseen = [p for p in places if p not in self.scores and p not in chosen]
+        if unseen:
+            start = self._turn % len(unseen)
+            take = (unseen[start:] + unseen[:start])[:budget - len(chosen)]
+            self._turn += len(take)
+            chosen += take
+        if len(chosen) < budget:
+            best = sorted((c for c in self.scores.values() if c.place_id not in chosen),
+                          key=lambda c: -c.lead)
+            chosen += [c.place_id for c in best[:budget - len(chosen)]]
+        return chosen
+
+    def observe(self, scores: list[PlaceScore]) -> None:
+        self.frames += 1
+        for sc in scores:
+            self.scores[sc.place_id] = Candidate(sc.place_id, sc.lead, self.frames)
+
+    def covered(self, places: list[int]) -> bool:
+        return all(p in self.scores for p in places)
+
+    def ranked(self) -> list[Candidate]:
+        return sorted(self.scores.values(), key=lambda c: -c.lead)
+
+    def best(self, places: list[int]) -> Candidate | None:
+        """The most likely place (§9.2) once every place has been recognised, if it
+        stands at least ``search_min_lead`` above its background; None before."""
+        if not places or not self.covered(places):
+            return None
+        good = [c for c in self.ranked() if c.lead >= self.settings.search_min_lead]
+        fresh = [c for c in good if c.place_id not in self.rejected]
+        if not fresh and good:  # only a place tried before: try it again
+            self.rejected.clear()
+        chosen = fresh or good
+        return chosen[0] if chosen else None
+
+    def leader_over(self, current: int, places: list[int]) -> Candidate | None:
+        """A place other than ``current`` leading it by ``search_margin``: the robot is
+        no longer where the estimate says (a kidnap), so recovery goes global at once."""
+        best = self.best(places)
+        here = self.scores.get(current)
+        if best is None or best.place_id == current or here is None:
+            return None
+        return best if best.lead >= here.lead + self.settings.search_margin else None
+
+
+class LossDetector:
+    """Loss of tracking: the confidence below ``loss_confidence`` for ``loss_frames``
+    frames in a row (§9.3.1)."""
+
+    def __init__(self, settings: LocalisationSettings) -> None:
+        self.settings = settings
+        self.low_frames = 0
+
+    def reset(self) -> None:
+        self.low_frames = 0
+
+    def observe(self, confidence: float) -> bool:
+        """True on the frame the loss is declared."""
+        self.low_frames = self.low_frames + 1 if confidence < self.settings.loss_confidence \
+            else 0
+        return self.low_frames == self.settings.loss_frames
+
+    @property
+    def suspicious(self) -> bool:
+        """At least one low frame: worth searching the map in the background."""
+        return self.low_frames > 0

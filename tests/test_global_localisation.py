@@ -1,0 +1,68 @@
+"""The global search and loss detection (daemon/localisation/global_localisation.py) on
+crafted recognition scores."""
+
+from __future__ import annotations
+
+from daemon.localisation.belief import PlaceScore
+from daemon.localisation.global_localisation import LossDetector, PlaceSearch
+from daemon.localisation.settings import LocalisationSettings
+
+PLACES = list(range(1, 51))
+
+
+def _lead(place: int, true_place: int) -> float:
+    return 0.25 if place == true_place else 0.01 * (place % 3)
+
+
+def test_every_place_is_recognised_within_its_budget_then_the_best_is_named() -> None:
+    search = PlaceSearch(LocalisationSettings(search_places_per_frame=12))
+    search.reset(0)
+    seen: set[int] = set()
+    for frame in range(5):
+        chosen = search.to_score(PLACES, first=(7,))
+        assert len(chosen) <= 12 and chosen[0] == 7
+        assert search.best(PLACES) is None  # not before every place has been looked at
+        search.observe([PlaceScore(p, 0.7, _lead(p, 33)) for p in chosen])
+        seen |= set(chosen)
+        if frame < 4:
+            assert len(seen) == min(50, 1 + 11 * (frame + 1))
+    assert seen == set(PLACES)  # 1 + 11 x 5 >= 50: nothing left out
+    best = search.best(PLACES)
+    assert best is not None and best.place_id == 33
+    # Once covered, the budget goes to the best so far again.
+    assert 33 in search.to_score(PLACES)
+
+
+def test_no_place_is_named_below_the_minimum_lead_and_rejected_ones_come_last() -> None:
+    s = LocalisationSettings(search_places_per_frame=100, search_min_lead=0.05)
+    search = PlaceSearch(s)
+    search.reset(0)
+    search.observe([PlaceScore(p, 0.7, 0.02) for p in PLACES])
+    assert search.best(PLACES) is None
+    search.reset(0, rejected={4})
+    search.observe([PlaceScore(p, 0.7, {4: 0.3, 9: 0.1}.get(p, 0.0)) for p in PLACES])
+    assert search.best(PLACES).place_id == 9  # type: ignore[union-attr]
+    search.reset(0, rejected={4})
+    search.observe([PlaceScore(p, 0.7, 0.3 if p == 4 else 0.0) for p in PLACES])
+    assert search.best(PLACES).place_id == 4  # type: ignore[union-attr]  # nothing else
+
+
+def test_a_place_clearly_ahead_of_the_current_one_is_a_kidnap() -> None:
+    search = PlaceSearch(LocalisationSettings(search_places_per_frame=100, search_margin=0.05))
+    search.reset(0)
+    search.observe([PlaceScore(p, 0.7, {2: 0.20, 5: 0.24}.get(p, 0.0)) for p in PLACES])
+    assert search.leader_over(2, PLACES) is None  # 0.04 ahead: not clearly
+    search.observe([PlaceScore(5, 0.8, 0.30)])
+    leader = search.leader_over(2, PLACES)
+    assert leader is not None and leader.place_id == 5
+    assert search.leader_over(5, PLACES) is None
+
+
+def test_a_loss_is_declared_on_the_fifth_low_frame_in_a_row() -> None:
+    loss = LossDetector(LocalisationSettings(loss_confidence=0.6, loss_frames=5))
+    assert [loss.observe(c) for c in (0.5, 0.5, 0.9, 0.5, 0.5, 0.5, 0.5)] == [False] * 7
+    assert loss.suspicious
+    assert loss.observe(0.59) is True
+    assert loss.observe(0.1) is False  # declared once
+    loss.reset()
+    assert not loss.suspicious
