@@ -59,10 +59,17 @@ def test_a_place_clearly_ahead_of_the_current_one_is_a_kidnap() -> None:
 
 
 def test_a_loss_is_declared_on_the_fifth_low_frame_in_a_row() -> None:
-    loss = LossDetector(LocalisationSettings(loss_confidence=0.6, loss_frames=5))
-    assert [loss.observe(c) for c in (0.5, 0.5, 0.9, 0.5, 0.5, 0.5, 0.5)] == [False] * 7
+    loss = LossDetector(LocalisationSettings(loss_output=0.15, loss_frames=5))
+    assert [loss.observe(c) for c in (0.1, 0.1, 0.5, 0.1, 0.1, 0.1, 0.1)] == [False] * 7
     assert loss.suspicious
-    assert loss.observe(0.59) is True
+    assert loss.observe(0.149) is True
     assert loss.observe(0.1) is False  # declared once
     loss.reset()
     assert not loss.suspicious
+
+
+def test_no_usable_landmark_is_no_evidence_of_a_loss() -> None:
+    loss = LossDetector(LocalisationSettings(loss_output=0.15, loss_frames=2))
+    assert loss.observe(0.1) is False
+    assert loss.observe(float("nan")) is False and loss.low_frames == 1
+    assert loss.observe(0.1) is True

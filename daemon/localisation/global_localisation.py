@@ -5,13 +5,15 @@
 not yet recognised in this search first, then the best so far again) and names the most
 likely place — the highest LRP minus background, §9.2 — once every place has been
 recognised since the search began (nothing is dropped for good). :class:`LossDetector`
-declares a loss when the confidence (the raw sensor-model output at the estimate) stays
-below a threshold for a number of frames in a row (§9.3.1). The recovery that follows,
+declares a loss when the raw sensor-model output at the estimate, over all the place's
+landmarks (``LocalResult.support``), stays below a threshold for a number of frames in a
+row (§9.3.1). The recovery that follows,
 in the order of §9.3.2, is the localiser's (daemon/localisation/localiser.py).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from daemon.localisation.belief import PlaceScore
@@ -101,8 +103,8 @@ class PlaceSearch:
 
 
 class LossDetector:
-    """Loss of tracking: the confidence below ``loss_confidence`` for ``loss_frames``
-    frames in a row (§9.3.1)."""
+    """Loss of tracking: the raw output below ``loss_output`` for ``loss_frames`` frames
+    in a row (§9.3.1)."""
 
     def __init__(self, settings: LocalisationSettings) -> None:
         self.settings = settings
@@ -111,10 +113,12 @@ class LossDetector:
     def reset(self) -> None:
         self.low_frames = 0
 
-    def observe(self, confidence: float) -> bool:
-        """True on the frame the loss is declared."""
-        self.low_frames = self.low_frames + 1 if confidence < self.settings.loss_confidence \
-            else 0
+    def observe(self, output: float) -> bool:
+        """True on the frame the loss is declared. NaN (no landmark usable from the
+        estimate: far from the place, on odometry) is no evidence and changes nothing."""
+        if math.isnan(output):
+            return False
+        self.low_frames = self.low_frames + 1 if output < self.settings.loss_output else 0
         return self.low_frames == self.settings.loss_frames
 
     @property

@@ -34,6 +34,7 @@ from kernel.se2 import SE2
 class LocalResult:
     estimate: Estimate
     confidence: float  # raw sensor-model output at the estimate, [0, 1]
+    support: float = 1.0  # the same over the landmarks usable from here, seen or not
 
 
 def initial_orientation(bearings: np.ndarray, reference: np.ndarray, ncc: np.ndarray,
@@ -71,6 +72,7 @@ class PlaceTracker:
         self.filter = ParticleFilter(settings, rng)
         self.estimate: Estimate | None = None
         self.confidence = 0.0  # of the last update
+        self.support = 0.0
 
     def start(self, grey: np.ndarray, pose: tuple[float, float, float], sigma_xy: float,
               sigma_yaw: float) -> None:
@@ -146,7 +148,13 @@ class PlaceTracker:
         at_estimate = self.model(np.array([self.estimate.pose]), bearings, sigma_bearing,
                                  self.geometry)[0]
         self.confidence = raw_output(at_estimate, weights)
-        return LocalResult(self.estimate, self.confidence)
+        # How much of the place is seen where the estimate expects it: every landmark
+        # usable from here counted, seen or not (a kidnapped robot sees few, and fits
+        # those few well); NaN with fewer than three usable (no evidence either way).
+        usable = float(kept.sum())
+        self.support = float((at_estimate * weights).sum() / usable) if usable >= 3 \
+            else math.nan
+        return LocalResult(self.estimate, self.confidence, self.support)
 
     def move_to(self, pose: tuple[float, float, float], covariance: np.ndarray) -> None:
         """Redistribute the particles around ``pose`` (a pose passed in from another

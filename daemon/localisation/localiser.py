@@ -180,8 +180,8 @@ class Localiser:
         """(place, T_place_robot) when the current estimate is reliable (σ_xy and
         confidence as for closing a cycle), else None. Safe to call from another thread."""
         tracker = self.tracker
-        if tracker is None or tracker.estimate is None:
-            return None
+        if tracker is None or tracker.estimate is None or self.mode != "track":
+            return None  # not while lost or before a relocalisation is confirmed
         est = tracker.estimate
         if not reliable(est.covariance, tracker.confidence, self.settings):
             return None
@@ -294,7 +294,7 @@ class Localiser:
         if local is None or self.tracker is None:
             return [], None  # a tracker started this frame
         current = self.tracker.place.id
-        lost_now = self.loss.observe(local.confidence)
+        lost_now = self.loss.observe(local.support)
         self._mode_frames += 1
         scored: list[PlaceScore] = []
         if self.mode != "confirm" and (self.loss.suspicious or self.mode == "recover"):
@@ -308,8 +308,8 @@ class Localiser:
             if not lost_now:
                 return scored, None
             self._episode = (stamp_ns, self._frames)
-            event = LocalisationEvent("lost", current, f"confidence below "
-                                      f"{self.settings.loss_confidence} for "
+            event = LocalisationEvent("lost", current, f"sensor output below "
+                                      f"{self.settings.loss_output} for "
                                       f"{self.settings.loss_frames} frames")
             leader = self.search.leader_over(current, places)
             if leader is not None:
@@ -347,7 +347,7 @@ class Localiser:
         return scored
 
     def _recovered(self, local: LocalResult) -> bool:
-        return local.confidence >= self.settings.loss_confidence and reliable(
+        return local.support >= self.settings.recovered_output and reliable(
             local.estimate.covariance, local.confidence, self.settings)
 
     def _begin_search(self, stamp_ns: int, rejected: set[int] | None = None,

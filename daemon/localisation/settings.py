@@ -103,13 +103,19 @@ class LocalisationSettings:
                                       "reference (§9.3.2)")
     background_lrp: float = setting(0.7, ge=0.0, le=1.0,
                                     doc="a place's background LRP until it is measured")
-    loss_confidence: float = setting(0.6, ge=0.0, le=1.0, doc="a frame whose confidence "
-                                     "(the raw sensor-model output at the estimate) is "
-                                     "below this counts towards a loss (§9.3.1)...")
+    loss_output: float = setting(0.15, ge=0.0, le=1.0, doc="a frame whose raw sensor-model "
+                                 "output at the estimate over all the place's landmarks "
+                                 "(seen or not; 0.35-0.85 while tracking, 0.01-0.07 "
+                                 "kidnapped) is below this counts towards a loss "
+                                 "(§9.3.1)...")
     loss_frames: int = setting(5, ge=1, le=1000, doc="...and this many in a row are one")
     recovery_local_sigma_m: float = setting(0.2, gt=0.0, le=5.0, doc="recovery step 1: "
                                             "particles redistributed this far around the "
                                             "estimate (§9.3.2)")
+    recovered_output: float = setting(0.3, ge=0.0, le=1.0, doc="a recovered or "
+                                      "relocalised estimate must also reach this raw "
+                                      "output (not just be sure of itself: a wrong mode "
+                                      "can be)")
     recovery_frames: int = setting(3, ge=1, le=1000, doc="frames each recovery step is "
                                    "given to become reliable before the next is tried")
     confirm_frames: int = setting(15, ge=1, le=10_000, doc="a place chosen by global "

@@ -32,6 +32,10 @@ EXPERIMENTS: dict[str, tuple[str, str, str]] = {
                "places, against odometry (design §8, thesis §8.2)"),
     "replay": ("tools.eval.replay", "", "a recording through the daemon's pipeline: "
                "the daemon's poses, frame by frame (design §10)"),
+    "global": ("tools.eval.global_tour", "office", "the most likely place along a tour "
+               "through a map of many places, started with no pose (design §9)"),
+    "kidnap": ("tools.eval.kidnap", "office", "the kidnapped robot: loss detected, right "
+               "place, error, over many random kidnaps (design §9, thesis §9.6)"),
     "mapping": ("tools.eval.mapping", "open-room", "places learned on the robot's own along "
                 "a tour, and how well they cover it (design §6)"),
 }
