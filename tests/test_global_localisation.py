@@ -73,3 +73,21 @@ def test_no_usable_landmark_is_no_evidence_of_a_loss() -> None:
     assert loss.observe(0.1) is False
     assert loss.observe(float("nan")) is False and loss.low_frames == 1
     assert loss.observe(0.1) is True
+
+
+def test_with_a_cue_the_active_set_is_searched_best_first_and_decides() -> None:
+    s = LocalisationSettings(search_places_per_frame=5, cue_margin=0.05)
+    search = PlaceSearch(s)
+    search.reset(0)
+    cue = {p: 0.9 - 0.01 * abs(p - 20) for p in PLACES}  # best at 20; 16..24 within 0.05
+    search.set_cue(cue, always=(3,))
+    assert search.active == set(range(15, 26)) | {3}
+    chosen = search.to_score(PLACES, first=(3,))
+    assert chosen == [3, 20, 19, 21, 18]  # the current place, then best cue first
+    search.observe([PlaceScore(p, 0.7, 0.2 if p == 21 else 0.0) for p in chosen])
+    assert search.best(PLACES) is None  # 15..25 not all recognised yet
+    for _ in range(2):
+        search.observe([PlaceScore(p, 0.7, 0.2 if p == 21 else 0.0)
+                        for p in search.to_score(PLACES, first=(3,))])
+    assert search.covered(PLACES) and not all(p in search.scores for p in PLACES)
+    assert search.best(PLACES).place_id == 21  # type: ignore[union-attr]

@@ -174,6 +174,7 @@ def test_version_2_map_keeps_its_places_and_gains_background_estimates(tmp_path:
     _two_places(path).close()
     db = sqlite3.connect(path)  # what a version 2 file holds: no background_estimate
     db.execute("ALTER TABLE places DROP COLUMN background_estimate")
+    db.execute("ALTER TABLE places DROP COLUMN signature")
     db.execute("UPDATE meta SET value = '2' WHERE key = 'schema_version'")
     db.commit()
     db.close()
@@ -187,6 +188,8 @@ def test_version_2_map_keeps_its_places_and_gains_background_estimates(tmp_path:
         estimates = [p.background_estimate for p in store.load().places]
         assert all(e is not None and -1.0 <= e <= 1.0 for e in estimates), estimates
         assert [p.background_estimate for p in mapper.graph.places] == estimates
+        assert all(p.signature is not None and p.signature.shape == (144,)
+                   for p in store.load().places)
 
 
 def test_readers_are_not_blocked_by_the_writer(tmp_path: Path) -> None:

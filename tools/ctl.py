@@ -386,20 +386,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--sigma-yaw", type=float, help="radians; above 0.2 the view decides")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_set_pose)
-    p = sub.add_parser("pose", help="the robot's pose in the current place")
-    p.add_argument("--follow", action="store_true", help="every pose as it is published")
-    p.add_argument("--count", type=int, default=0, help="with --follow: stop after this many")
-    p.add_argument("--duration", type=float, default=1e9,
-                   help="with --follow: stop after this many seconds")
-    p.add_argument("--json", action="store_true", help="one JSON object per line")
-    p.set_defaults(func=cmd_pose)
-    p = sub.add_parser("events", help="the daemon's events (learned, lost, relocalised...)")
-    p.add_argument("--follow", action="store_true", help="every event as it is published")
-    p.add_argument("--count", type=int, default=0, help="with --follow: stop after this many")
-    p.add_argument("--duration", type=float, default=1e9,
-                   help="with --follow: stop after this many seconds")
-    p.add_argument("--json", action="store_true", help="one JSON object per line")
-    p.set_defaults(func=cmd_events)
+    for leaf, what, func in (("pose", "the robot's pose in the current place", cmd_pose),
+                             ("events", "the daemon's events (learned, lost, relocalised...)",
+                              cmd_events)):
+        p = sub.add_parser(leaf, help=what)
+        p.add_argument("--follow", action="store_true", help="every one as it is published")
+        p.add_argument("--count", type=int, default=0,
+                       help="with --follow: stop after this many")
+        p.add_argument("--duration", type=float, default=1e9,
+                       help="with --follow: stop after this many seconds")
+        p.add_argument("--json", action="store_true", help="one JSON object per line")
+        p.set_defaults(func=func)
     p = sub.add_parser("relocalise", help="forget the pose and search the whole map")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_relocalise)

@@ -2,13 +2,16 @@
 §9; thesis §9.2-9.4).
 
 :class:`PlaceSearch` recognises the map's places a frame's budget at a time (every place
-not yet recognised in this search first, then the best so far again) and names the most
-likely place — the highest LRP minus background, §9.2 — once every place has been
-recognised since the search began (nothing is dropped for good). :class:`LossDetector`
-declares a loss when the raw sensor-model output at the estimate, over all the place's
-landmarks (``LocalResult.support``), stays below a threshold for a number of frames in a
-row (§9.3.1). The recovery that follows,
-in the order of §9.3.2, is the localiser's (daemon/localisation/localiser.py).
+not yet recognised in this search first — best first by the cheap cue when there is one
+— then the best so far again) and names the most likely place — the highest LRP minus
+background, §9.2 — once every place of the *active set* has been recognised since the
+search began: the places whose cue is within ``cue_margin`` of the best cue, plus the
+current place and its neighbours (§9.4.2; without a cue, every place). The others are
+still recognised on later frames while no place is named (nothing is dropped for good).
+:class:`LossDetector` declares a loss when the raw sensor-model output at the estimate,
+over the place's landmarks usable from there (``LocalResult.support``), stays below a
+threshold for a number of frames in a row (§9.3.1). The recovery that follows, in the
+order of §9.3.2, is the localiser's (daemon/localisation/localiser.py).
 """
 
 from __future__ import annotations
@@ -36,15 +39,30 @@ class PlaceSearch:
         self.frames = 0
         self.started_ns: int | None = None
         self.rejected: set[int] = set()  # tried and not confirmed in this search
+        self.cue: dict[int, float] = {}  # this frame's cue per place (signature similarity)
+        self.active: set[int] | None = None  # the active set (None: every place)
         self._turn = 0
 
     def reset(self, stamp_ns: int | None = None, rejected: set[int] | None = None) -> None:
         """A new search from the frame at ``stamp_ns`` on; places in ``rejected`` are
         chosen only when no other place qualifies (they stay recognised and reported)."""
         self.scores.clear()
+        self.cue, self.active = {}, None
         self.frames = 0
         self.started_ns = stamp_ns
         self.rejected = set(rejected or ())
+
+    def set_cue(self, cue: dict[int, float], always: tuple[int, ...] = ()) -> None:
+        """This frame's cue per place; the active set is every place within
+        ``cue_margin`` of the best, and ``always`` (the previous most likely place, its
+        nearest neighbours)."""
+        self.cue = cue
+        if not cue:
+            self.active = None
+            return
+        top = max(cue.values())
+        self.active = {p for p, c in cue.items() if c >= top - self.settings.cue_margin} \
+            | set(always)
 
     @property
     def running(self) -> bool:
@@ -58,7 +76,10 @@ class PlaceSearch:
         known = set(places)
         chosen = [p for p in dict.fromkeys(first) if p in known][:budget]
         unseen = [p for p in places if p not in self.scores and p not in chosen]
-        if unseen:
+        if unseen and self.cue:  # best first by the cue
+            unseen.sort(key=lambda p: -self.cue.get(p, -math.inf))
+            chosen += unseen[:budget - len(chosen)]
+        elif unseen:
             start = self._turn % len(unseen)
             take = (unseen[start:] + unseen[:start])[:budget - len(chosen)]
             self._turn += len(take)
@@ -75,7 +96,10 @@ class PlaceSearch:
             self.scores[sc.place_id] = Candidate(sc.place_id, sc.lead, self.frames)
 
     def covered(self, places: list[int]) -> bool:
-        return all(p in self.scores for p in places)
+        """Every place of the active set (every one of ``places`` without a cue) has
+        been recognised in this search."""
+        needed = places if self.active is None else [p for p in places if p in self.active]
+        return all(p in self.scores for p in needed)
 
     def ranked(self) -> list[Candidate]:
         return sorted(self.scores.values(), key=lambda c: -c.lead)
@@ -85,7 +109,9 @@ class PlaceSearch:
         stands at least ``search_min_lead`` above its background; None before."""
         if not places or not self.covered(places):
             return None
-        good = [c for c in self.ranked() if c.lead >= self.settings.search_min_lead]
+        known = set(places)
+        good = [c for c in self.ranked() if c.lead >= self.settings.search_min_lead
+                and c.place_id in known]
         fresh = [c for c in good if c.place_id not in self.rejected]
         if not fresh and good:  # only a place tried before: try it again
             self.rejected.clear()

@@ -46,6 +46,7 @@ from daemon.mapping.place import Place
 from daemon.mapping.settings import AcquisitionSettings, OdometryNoiseSettings
 from daemon.mapping.transition import Transition
 from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
+from daemon.vision.signature import signature, similarity
 from daemon.vision.unwarp import Unwarper
 from kernel.errors import PlacecellError
 from kernel.panorama import to_grey
@@ -286,7 +287,7 @@ class Localiser:
             if self._episode is None:
                 self._episode = (stamp_ns, self._frames)
             first = (self.tracker.place.id,) if self.tracker is not None else ()
-            found_in = self._search_step(prepare, places, first)
+            found_in = self._search_step(prepare, grey, places, first)
             best = self.search.best(places)
             if best is not None:
                 self._start_in(grey, best.place_id)
@@ -300,7 +301,8 @@ class Localiser:
         if self.mode != "confirm" and (self.loss.suspicious or self.mode == "recover"):
             if not self.search.running:
                 self.search.reset(stamp_ns)
-            scored = self._search_step(prepare, places, (current, *self._links.get(current, {})))
+            scored = self._search_step(prepare, grey, places,
+                                       (current, *self._links.get(current, {})))
         elif self.mode == "track":
             self.search.reset(None)  # confident again: no background search
         found = self._recovered(local)
@@ -340,8 +342,17 @@ class Localiser:
                     self._begin_search(stamp_ns, rejected={current}, keep_episode=True)
         return scored, None
 
-    def _search_step(self, prepare: Callable[[], PreparedPanorama], places: list[int],
-                     first: tuple[int, ...]) -> list[PlaceScore]:
+    def _search_step(self, prepare: Callable[[], PreparedPanorama], grey: np.ndarray,
+                     places: list[int], first: tuple[int, ...]) -> list[PlaceScore]:
+        """One frame of the search: the cue of every place (signature similarity, design
+        §9), then the frame's budget of places recognised, best first."""
+        with_signature = [p for p in places if self._known[p].place.signature is not None]
+        if with_signature:
+            sigs = np.stack([self._known[p].place.signature  # type: ignore[misc]
+                             for p in with_signature])
+            here = signature(grey, self.unwarper.panorama.wrap_margin)
+            self.search.set_cue(dict(zip(with_signature, similarity(here, sigs).tolist(),
+                                         strict=True)), first)
         scored = self._score_many(prepare(), self.search.to_score(places, first))
         self.search.observe(scored)
         return scored

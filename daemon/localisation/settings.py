@@ -128,6 +128,9 @@ class LocalisationSettings:
                                      "picks the most likely place once every place has "
                                      "been recognised and its LRP minus background is at "
                                      "least this (§9.2)")
+    cue_margin: float = setting(0.05, ge=0.0, le=2.0, doc="the active set: places whose "
+                                "signature similarity is within this of the best "
+                                "(design §9; thesis §9.4.1's B for local space)")
     search_margin: float = setting(0.05, ge=0.0, le=1.0, doc="lost: a place leading the "
                                    "current one by this goes straight to global "
                                    "relocalisation (the robot was carried off)")

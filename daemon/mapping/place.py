@@ -6,12 +6,14 @@ Pure data. The map file (daemon/store) persists it; the service stamps the creat
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
 from daemon.vision.landmarks import LandmarkSet
 from daemon.vision.recognition import best_ncc_elsewhere
+from daemon.vision.signature import signature
 from kernel.panorama import to_grey
 
 
@@ -26,7 +28,9 @@ class Place:
     ``id`` is 0 until the map file assigns one. ``background_lrp`` is the LRP the place's
     landmark set settles at away from it (§7.1), None until measured;
     ``background_estimate`` the same level estimated when the place is learned
-    (:func:`estimate_background`), used until it is measured; ``local_space``
+    (:func:`estimate_background`), used until it is measured; ``signature`` the
+    reference panorama's rotation-invariant signature (daemon/vision/signature.py), the
+    cheap cue that orders the global search (None in maps made before it); ``local_space``
     holds the 16-bin local space profile of chapter 5 once it is measured (None before).
     """
 
@@ -36,6 +40,7 @@ class Place:
     created_unix_s: float = 0.0
     background_lrp: float | None = None
     background_estimate: float | None = None
+    signature: np.ndarray | None = None  # the reference panorama's azimuth signature
     local_space: np.ndarray | None = None
     id: int = 0
 
@@ -54,6 +59,16 @@ class Place:
     @property
     def landmark_count(self) -> int:
         return len(self.landmarks.landmarks)
+
+
+def with_cues(place: Place) -> Place:
+    """The place with what its reference panorama gives the global search (design §9):
+    the background estimate and the signature."""
+    pano = place.reference_panorama
+    assert pano is not None, "cues come from the reference panorama"
+    return dataclasses.replace(
+        place, background_estimate=estimate_background(place.landmarks, pano),
+        signature=signature(to_grey(pano), place.landmarks.margin))
 
 
 def estimate_background(landmarks: LandmarkSet, reference_panorama: np.ndarray) -> float:

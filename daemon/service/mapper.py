@@ -15,7 +15,7 @@ import threading
 
 from daemon.mapping.graph import TopologicalMap
 from daemon.mapping.odometry_chain import OdometryChain
-from daemon.mapping.place import Place, estimate_background
+from daemon.mapping.place import Place, with_cues
 from daemon.mapping.settings import OdometryNoiseSettings
 from daemon.mapping.transition import Transition, TransitionSource
 from daemon.store.sqlite_store import MapStore, PlaceSummary
@@ -45,24 +45,25 @@ class Mapper:
         self.noise = noise
         self._lock = threading.RLock()
         self.graph: TopologicalMap = store.load()
-        self._estimate_backgrounds()
+        self._fill_cues()
         self._last_place: int | None = None  # learned in this run of odometry
         self._chain: OdometryChain | None = None  # from that place's reference pose
         self._pending: OdometryChain | None = None  # from the reference of a place in work
         self._recent: collections.deque[Odometry] = collections.deque(maxlen=500)
 
-    def _estimate_backgrounds(self) -> None:
-        """Places stored before the map held background estimates (schema 2) get them
-        from their reference panoramas, once (a read-only map is left as it is)."""
+    def _fill_cues(self) -> None:
+        """Places stored before the map held the global search's cues (schema 2) get
+        them from their reference panoramas, once (a read-only map is left as it is)."""
         if self.store.readonly:
             return
         for place in list(self.graph.places):
-            if place.background_estimate is None:
-                estimate = estimate_background(place.landmarks,
-                                               self.store.reference_panorama(place.id))
-                self.store.set_background_estimate(place.id, estimate)
-                self.graph.add_place(dataclasses.replace(place, background_estimate=estimate))
-                log.info("place %d: background LRP estimated at %.3f", place.id, estimate)
+            if place.background_estimate is None or place.signature is None:
+                full = with_cues(self.store.place(place.id, panorama=True))
+                assert full.background_estimate is not None and full.signature is not None
+                self.store.set_cues(place.id, full.background_estimate, full.signature)
+                self.graph.add_place(dataclasses.replace(full, reference_panorama=None))
+                log.info("place %d: background LRP estimated at %.3f", place.id,
+                         full.background_estimate)
 
     # ------------------------------------------------------------ odometry
     def on_odometry(self, samples: list[Odometry]) -> None:
@@ -113,9 +114,9 @@ class Mapper:
         """Store a learned place (with its transition from the last place, both ways) and
         make it the one the next place is measured from."""
         links = [] if link is None else [(link.from_id, link.T_from_new, link.source)]
-        if place.background_estimate is None and place.reference_panorama is not None:
-            place = dataclasses.replace(place, background_estimate=estimate_background(
-                place.landmarks, place.reference_panorama))
+        if place.reference_panorama is not None and (
+                place.background_estimate is None or place.signature is None):
+            place = with_cues(place)
         with self._lock:
             stored = self.store.add_place(place, links)
             # In memory without its panorama: the map file has it (design §6).

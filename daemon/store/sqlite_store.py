@@ -49,6 +49,7 @@ CREATE TABLE places (
     created_unix_s REAL NOT NULL,
     background_lrp REAL,
     background_estimate REAL,           -- v3: from the reference panorama, NULL if not made
+    signature      BLOB,                -- v3: float64, daemon/vision/signature.py
     landmark_count INTEGER NOT NULL,
     landmarks      BLOB NOT NULL,       -- daemon/store/codec.py
     panorama       BLOB NOT NULL,       -- reference panorama, lossless PNG
@@ -69,7 +70,7 @@ CREATE INDEX transitions_to ON transitions(to_id);
 
 
 _PLACE_COLUMNS = ("id, label, created_unix_s, background_lrp, landmarks, local_space, "
-                  "digest, background_estimate")
+                  "digest, background_estimate, signature")
 
 
 @dataclass(frozen=True)
@@ -207,7 +208,7 @@ class MapStore:
         return TopologicalMap(places, self.transitions())
 
     def _decode_place(self, row: Sequence[Any]) -> Place:
-        pid, label, created, background, lm_blob, ls_blob, stored, estimate = row
+        pid, label, created, background, lm_blob, ls_blob, stored, estimate, sig = row
         where = f"{self.path}: place {pid}"
         if codec.digest(lm_blob, ls_blob) != stored:
             raise MapStoreError(f"{where} is damaged (its bytes do not match their digest)")
@@ -216,6 +217,7 @@ class MapStore:
             return Place(landmarks, None, label=str(label), created_unix_s=float(created),
                          background_lrp=None if background is None else float(background),
                          background_estimate=None if estimate is None else float(estimate),
+                         signature=codec.decode_vector(sig),
                          local_space=codec.decode_vector(ls_blob), id=int(pid))
         except ValueError as e:
             raise MapStoreError(f"{where}: {e}") from e
@@ -258,11 +260,14 @@ class MapStore:
             self._db.execute("UPDATE places SET background_lrp = ? WHERE id = ?",
                              (float(background_lrp), place_id))
 
-    def set_background_estimate(self, place_id: int, estimate: float) -> None:
+    def set_cues(self, place_id: int, background_estimate: float, signature: np.ndarray
+                 ) -> None:
+        """What is derived from a place's reference panorama (a schema-2 map lacks it)."""
         self._writable()
         with self._lock, _transaction(self._db):
-            self._db.execute("UPDATE places SET background_estimate = ? WHERE id = ?",
-                             (float(estimate), place_id))
+            self._db.execute("UPDATE places SET background_estimate = ?, signature = ? "
+                             "WHERE id = ?", (float(background_estimate),
+                                              codec.encode_vector(signature), place_id))
 
     def _insert_place(self, place: Place, keep_id: bool) -> int:
         if place.reference_panorama is None:
@@ -272,11 +277,12 @@ class MapStore:
         ls = codec.encode_vector(place.local_space)
         cur = self._db.execute(
             "INSERT INTO places(id, label, created_unix_s, background_lrp, "
-            "background_estimate, landmark_count, landmarks, panorama, local_space, digest, "
-            "panorama_digest) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            "background_estimate, signature, landmark_count, landmarks, panorama, local_space, "
+            "digest, panorama_digest) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             (place.id if keep_id else None, place.label, place.created_unix_s,
-             place.background_lrp, place.background_estimate, place.landmark_count, lm, pano,
-             ls, codec.digest(lm, ls), codec.digest(pano)))
+             place.background_lrp, place.background_estimate,
+             codec.encode_vector(place.signature), place.landmark_count, lm, pano, ls,
+             codec.digest(lm, ls), codec.digest(pano)))
         return int(cur.lastrowid or 0)
 
     def _put_transition(self, t: Transition) -> None:
@@ -391,11 +397,12 @@ def _create_tables(db: sqlite3.Connection) -> None:
 
 def _migrate(db: sqlite3.Connection, p: Path, version: int) -> None:
     """To the current version, in one transaction: 1 (meta, empty places and transitions
-    tables) is rebuilt; 2 gains places.background_estimate (NULL: the daemon's mapper
-    makes it from the stored reference panoramas)."""
+    tables) is rebuilt; 2 gains places.background_estimate and places.signature (NULL:
+    the daemon's mapper makes them from the stored reference panoramas)."""
     with _transaction(db):
         if version == 2:
             db.execute("ALTER TABLE places ADD COLUMN background_estimate REAL")
+            db.execute("ALTER TABLE places ADD COLUMN signature BLOB")
             db.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'",
                        (str(SCHEMA_VERSION),))
         if version == 1:
