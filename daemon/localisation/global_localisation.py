@@ -70,12 +70,15 @@ class PlaceSearch:
 
     def to_score(self, places: list[int], first: tuple[int, ...] = ()) -> list[int]:
         """The places to recognise in this frame, at most ``search_places_per_frame``:
-        ``first`` (e.g. the current place and its neighbours), then every place not yet
-        recognised in this search, in turn, then the best so far again."""
+        ``first`` (e.g. the current place and its neighbours), then the places of the
+        active set not yet recognised in this search, best cue first — once they all
+        are, the others in turn — then the best so far again."""
         budget = self.settings.search_places_per_frame
         known = set(places)
         chosen = [p for p in dict.fromkeys(first) if p in known][:budget]
         unseen = [p for p in places if p not in self.scores and p not in chosen]
+        if self.active is not None and any(p in self.active for p in unseen):
+            unseen = [p for p in unseen if p in self.active]  # the active set first
         if unseen and self.cue:  # best first by the cue
             unseen.sort(key=lambda p: -self.cue.get(p, -math.inf))
             chosen += unseen[:budget - len(chosen)]

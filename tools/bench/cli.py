@@ -19,6 +19,7 @@ GROUPS = {
     "landmarks": "tools.bench.landmarks",
     "mapfile": "tools.bench.mapfile",
     "localisation": "tools.bench.localisation",
+    "global": "tools.bench.global_search",
 }
 
 

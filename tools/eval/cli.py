@@ -34,6 +34,8 @@ EXPERIMENTS: dict[str, tuple[str, str, str]] = {
                "the daemon's poses, frame by frame (design §10)"),
     "global": ("tools.eval.global_tour", "office", "the most likely place along a tour "
                "through a map of many places, started with no pose (design §9)"),
+    "active-set": ("tools.eval.active_set", "office", "the active set's cue along the "
+                   "global tour: inclusion of the right place and the set's size (design §9)"),
     "kidnap": ("tools.eval.kidnap", "office", "the kidnapped robot: loss detected, right "
                "place, error, over many random kidnaps (design §9, thesis §9.6)"),
     "mapping": ("tools.eval.mapping", "open-room", "places learned on the robot's own along "

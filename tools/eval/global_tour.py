@@ -12,7 +12,11 @@ than the nearest.
 Metrics: ``places``, ``frames``, ``mlp_accuracy`` (right on the tour's frames, the
 global search's first frames included), ``first_tracking_frame``, ``false_losses_per_1000``
 (losses declared per 1000 frames; the robot is never carried off here),
-``process_ms_median``.
+``process_ms_median``; and the active set's cue part (design §9: places whose signature
+similarity is within the cue margin of the best) scored on every frame:
+``inclusion_extra_cue`` (a right place in it), ``mean_set_fraction_extra_cue`` (its size
+over the map's) at ``[localisation] cue_margin``, and ``by_cue_margin`` at a few others.
+Local space profiles (the thesis's cue, §9.4.1) are not built yet: no ``inclusion``.
 """
 
 from __future__ import annotations
@@ -23,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from daemon.vision.signature import signature, similarity
+from kernel.panorama import to_grey
 from kernel.se2 import SE2
 from tools.eval.tour_map import Point, add_map_arguments, drive_to, mapped_run, right_place
 
@@ -39,12 +45,21 @@ def _mapped_part(tour: list[Point], references: dict[int, SE2]) -> list[Point]:
     return tour[:end + 1]
 
 
+MARGINS = (0.02, 0.05, 0.1, 0.2)  # cue margins the active set is also scored at
+
+
 def run(args: argparse.Namespace) -> dict[str, Any]:
     with mapped_run(args) as (r, tour):
         start = r.cfg.sim.start_pose
         r.robot.kidnap(start[0], start[1], start[2])
         r.process_s.clear()
+        ids = sorted(r.references)
+        margin = r.cfg.panorama.wrap_margin
+        signatures = np.stack([signature(to_grey(r.store.reference_panorama(p)), margin)
+                               for p in ids])
         right, losses, first_tracking = [], 0, None
+        included: dict[float, list[bool]] = {m: [] for m in MARGINS}
+        fraction: dict[float, list[float]] = {m: [] for m in MARGINS}
         for target in _mapped_part(tour, r.references)[1::10]:  # every metre of it
             for belief in drive_to(r, target, args.speed):
                 x, y, _ = r.robot.true_pose()
@@ -52,6 +67,16 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 losses += belief.event is not None and belief.event.kind == "lost"
                 if first_tracking is None and belief.state == "tracking":
                     first_tracking = len(right)
+                assert r.localiser.panorama is not None
+                cue = similarity(signature(to_grey(r.localiser.panorama), margin), signatures)
+                for m in MARGINS:  # the active set's cue part at margin m (design §9)
+                    members = [p for p, c in zip(ids, cue, strict=True) if c >= cue.max() - m]
+                    included[m].append(any(right_place(r.references, p, (x, y))
+                                           for p in members))
+                    fraction[m].append(len(members) / len(ids))
+        at = r.cfg.localisation.cue_margin
+        included.setdefault(at, included[min(MARGINS, key=lambda m: abs(m - at))])
+        fraction.setdefault(at, fraction[min(MARGINS, key=lambda m: abs(m - at))])
         return {"metrics": {
             "places": len(r.references),
             "frames": len(right),
@@ -59,5 +84,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             "first_tracking_frame": first_tracking,
             "false_losses_per_1000": round(1000.0 * losses / max(len(right), 1), 2),
             "process_ms_median": round(float(np.median(r.process_s)) * 1e3, 2),
+            "inclusion_extra_cue": round(float(np.mean(included[at])), 4),
+            "mean_set_fraction_extra_cue": round(float(np.mean(fraction[at])), 4),
+            "by_cue_margin": {str(m): {"inclusion": round(float(np.mean(included[m])), 4),
+                                       "mean_set_fraction": round(float(np.mean(
+                                           fraction[m])), 4)} for m in MARGINS},
         }, "config": {"places": args.places, "spacing_m": args.spacing, "speed": args.speed,
-                      "sensor_model": args.sensor_model}}
+                      "sensor_model": args.sensor_model, "cue_margin": at}}
