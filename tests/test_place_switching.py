@@ -113,3 +113,18 @@ def test_coming_round_a_loop_closes_the_cycle_at_once() -> None:
         is None
     assert sw.decide(5, [4], scores(p5=0.09, p4=0.0, p1=0.10), {5: 0.9, 4: 1.6, 1: 0.6}) \
         is None
+
+
+def test_a_place_the_graph_puts_near_is_checked_every_time_and_handed_over_to() -> None:
+    sw = PlaceSwitcher(LocalisationSettings(others_per_check=1))
+    known = list(range(1, 11))
+    for _ in range(5):  # in every check, whatever the rotation through the others
+        assert 7 in sw.to_check(1, [2], known, near=[7])
+    # Nearer by the graph (0.4 m against 0.9 m) and recognised nearly as well: through
+    # the graph's path, since there is no transition 1 -> 7.
+    switch = sw.decide(1, [2], scores(p1=0.10, p2=0.0, p7=0.05), {1: 0.9, 2: 1.4, 7: 0.4},
+                       near=[7])
+    assert switch is not None and (switch.kind, switch.place_id) == ("graph", 7)
+    # Not when the graph does not put it near (it is not in ``near``).
+    assert sw.decide(1, [2], scores(p1=0.10, p2=0.0, p7=0.05), {1: 0.9, 2: 1.4, 7: 0.4}
+                     ) is None

@@ -111,9 +111,11 @@ class PlaceTracker:
         self.rows = np.where(found.scores >= self.settings.min_ncc, found.rows, self.rows)
         return self._weigh(found, self._scale_kept(predicted))  # step 3
 
-    def start_anywhere(self, grey: np.ndarray, radius_m: float) -> LocalResult:
+    def start_anywhere(self, grey: np.ndarray, radius_m: float,
+                       centre: tuple[float, float] = (0.0, 0.0)) -> LocalResult:
         """Position in the place from nothing (§9.3.2 recovery over the whole place, and
-        global relocalisation's pick): particles over ``radius_m`` around the reference,
+        global relocalisation's pick): particles over ``radius_m`` around ``centre`` (the
+        reference, or where a path of transitions puts the robot),
         each turned to the orientation on which its position and the landmarks' bearings
         (searched over the whole panorama) agree — eq. 8.34 per particle, with the
         landmarks' positions instead of the reference bearings — then weighed by this
@@ -122,7 +124,7 @@ class PlaceTracker:
         found = self._track(grey, (0.0, 0.0, 0.0), radius=self.width // 2 - TEMPLATE)
         bearings = column_to_bearing_of_centre(found.cols, self.width)
         f = self.filter
-        f.initialise((0.0, 0.0, 0.0), radius_m, math.pi)
+        f.initialise((centre[0], centre[1], 0.0), radius_m, math.pi)
         good = found.scores >= s.orientation_ncc
         if good.sum() >= 3:
             mean = self.geometry.mean[good]

@@ -5,8 +5,11 @@ other places are recognised (LRP minus background). A neighbour that leads the c
 place by ``switch_margin`` takes over — unless the estimate is nearer the current place's
 reference — and so does one whose reference the estimate is ``handover_m`` nearer to, if
 recognised nearly as well: the estimate passes through the transition. A place with no
-transition from here must lead by ``cycle_margin``, and stand ``cycle_min_lead`` above its
-background, on ``cycle_checks`` checks in a row; the estimate then restarts in it, and once
+transition from here that the graph puts within ``cycle_near_m`` is recognised every
+check and handed over to the same way when the estimate is nearer its reference (through
+the graph's path, the direct transition then measured); any other must lead by
+``cycle_margin``, and stand ``cycle_min_lead`` above its background, on ``cycle_checks``
+checks in a row; the estimate then restarts in it, and once
 it is reliable the cycle's transition is measured (:class:`CycleClosure`).
 """
 
@@ -27,7 +30,7 @@ from kernel.se2 import UncertainSE2
 
 @dataclass(frozen=True)
 class Switch:
-    kind: Literal["neighbour", "cycle"]
+    kind: Literal["neighbour", "graph", "cycle"]  # graph: through a path of transitions
     place_id: int
 
 
@@ -37,23 +40,28 @@ class PlaceSwitcher:
         self._turn = 0  # where the rotation through the other places stands
         self._streak: tuple[int, int] | None = None  # (place, checks in a row)
 
-    def to_check(self, current: int, neighbours: list[int], known: list[int]) -> list[int]:
-        """The places to recognise now: the current one, its neighbours, and the next
-        ``others_per_check`` of the rest in turn (none is left out for good)."""
-        others = [p for p in known if p != current and p not in neighbours]
+    def to_check(self, current: int, neighbours: list[int], known: list[int],
+                 near: list[int] | None = None) -> list[int]:
+        """The places to recognise now: the current one, its neighbours, the places the
+        graph puts near (``near``), and the next ``others_per_check`` of the rest in
+        turn (none is left out for good)."""
+        near = [p for p in near or [] if p != current and p not in neighbours]
+        others = [p for p in known if p != current and p not in neighbours and p not in near]
         k = min(self.settings.others_per_check, len(others))
         chosen = [others[(self._turn + i) % len(others)] for i in range(k)] if others else []
         self._turn = (self._turn + k) % max(len(others), 1)
         if self._streak is not None and self._streak[0] in others \
                 and self._streak[0] not in chosen:
             chosen.append(self._streak[0])  # a place on a streak is checked every time
-        return [current, *neighbours, *chosen]
+        return [current, *neighbours, *near, *chosen]
 
     def decide(self, current: int, neighbours: list[int], scores: list[PlaceScore],
-               distance: dict[int, float] | None = None) -> Switch | None:
+               distance: dict[int, float] | None = None, near: list[int] | None = None
+               ) -> Switch | None:
         """``distance``: from the estimate to the reference of the current place and of
         other places reached through the transitions (neighbours directly, others along
-        the graph: a loop's places through the drifted sum round it)."""
+        the graph: a loop's places through the drifted sum round it). ``near``: places
+        with no transition from here that the graph puts within ``cycle_near_m``."""
         s = self.settings
         lead = {sc.place_id: sc.lead for sc in scores}
         here = lead.get(current, -1.0)
@@ -67,23 +75,23 @@ class PlaceSwitcher:
         # Beyond the thesis: positioning is most precise near a place's reference; hand
         # over to a neighbour the estimate is handover_m nearer to, recognised nearly as
         # well (a place's LRP may stay at its background until the robot is almost there).
-        nearer = [p for p in neighbours if p in lead and p in dist
+        nearer = [p for p in [*neighbours, *(near or [])] if p in lead and p in dist
                   and dist[p] + s.handover_m <= d_here
                   and lead[p] >= here - s.handover_tolerance]
         best_nb = max(rising or nearer, key=lambda p: lead[p], default=None)
         if best_nb is not None:
             self._streak = None
-            return Switch("neighbour", best_nb)
+            return Switch("neighbour" if best_nb in neighbours else "graph", best_nb)
         ceiling = max([here] + [lead[p] for p in neighbours if p in lead])
         others = [sc for sc in scores if sc.place_id != current and sc.place_id not in neighbours]
         # Coming round a loop: the graph puts a place without a transition from here
         # within cycle_near_m, and it is recognised above everything nearer by the graph.
-        near = [sc for sc in others if dist.get(sc.place_id, math.inf) <= s.cycle_near_m
-                and sc.lead >= ceiling + s.switch_margin
-                and dist[sc.place_id] <= d_here]
-        if near:
+        coming_round = [sc for sc in others if dist.get(sc.place_id, math.inf) <= s.cycle_near_m
+                        and sc.lead >= ceiling + s.switch_margin
+                        and dist[sc.place_id] <= d_here]
+        if coming_round:
             self._streak = None
-            return Switch("cycle", max(near, key=lambda sc: sc.lead).place_id)
+            return Switch("cycle", max(coming_round, key=lambda sc: sc.lead).place_id)
         best = max(others, key=lambda sc: sc.lead, default=None)
         if best is None or best.lead < max(ceiling + s.cycle_margin, s.cycle_min_lead):
             if best is not None and self._streak is not None \
