@@ -111,10 +111,14 @@ def _start(tmp: Path, drift: dict[str, float] | None) -> tuple[Path, int, Truth]
 
 
 def _wait_ready(config: Path) -> None:
-    def frames() -> bool:
+    def ready() -> bool:  # frames and odometry flowing, every component running
         st = _ctl(config, "status", "--json", timeout=30)
-        return st.returncode == 0 and json.loads(st.stdout)["rates"]["frames_hz"] > 0
-    assert wait_for(frames, 90, interval_s=0.5), "the daemon never delivered frames"
+        if st.returncode != 0:
+            return False
+        status = json.loads(st.stdout)
+        return bool(status["healthy"]) and status["rates"]["frames_hz"] > 0 \
+            and status["rates"]["odometry_hz"] > 0
+    assert wait_for(ready, 90, interval_s=0.5), "the daemon never delivered frames"
 
 
 def _learn_two(config: Path, truth: Truth) -> tuple[dict[str, Any], dict[str, Any]]:
