@@ -58,8 +58,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         signatures = np.stack([signature(to_grey(r.store.reference_panorama(p)), margin)
                                for p in ids])
         right, losses, first_tracking = [], 0, None
-        included: dict[float, list[bool]] = {m: [] for m in MARGINS}
-        fraction: dict[float, list[float]] = {m: [] for m in MARGINS}
+        at = r.cfg.localisation.cue_margin
+        margins = sorted({*MARGINS, at})
+        included: dict[float, list[bool]] = {m: [] for m in margins}
+        fraction: dict[float, list[float]] = {m: [] for m in margins}
         for target in _mapped_part(tour, r.references)[1::10]:  # every metre of it
             for belief in drive_to(r, target, args.speed):
                 x, y, _ = r.robot.true_pose()
@@ -69,14 +71,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                     first_tracking = len(right)
                 assert r.localiser.panorama is not None
                 cue = similarity(signature(to_grey(r.localiser.panorama), margin), signatures)
-                for m in MARGINS:  # the active set's cue part at margin m (design §9)
+                for m in margins:  # the active set's cue part at margin m (design §9)
                     members = [p for p, c in zip(ids, cue, strict=True) if c >= cue.max() - m]
                     included[m].append(any(right_place(r.references, p, (x, y))
                                            for p in members))
                     fraction[m].append(len(members) / len(ids))
-        at = r.cfg.localisation.cue_margin
-        included.setdefault(at, included[min(MARGINS, key=lambda m: abs(m - at))])
-        fraction.setdefault(at, fraction[min(MARGINS, key=lambda m: abs(m - at))])
         return {"metrics": {
             "places": len(r.references),
             "frames": len(right),
