@@ -77,12 +77,21 @@ def venv_bin(name: str) -> str:
 @contextlib.contextmanager
 def running_daemon(config: Path, env: dict[str, str] | None = None,
                    extra_args: list[str] | None = None) -> Iterator[subprocess.Popen[str]]:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "daemon", "--config", str(config), *(extra_args or [])],
-        cwd=REPO, env={**os.environ, **(env or {})}, stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT, text=True)
+    """The daemon in a subprocess, its log in ``daemon.log`` beside ``config`` (a file, not
+    a pipe nobody reads: a full pipe would block the daemon's logging); the log's tail is
+    printed when the test fails inside."""
+    log_path = config.with_name("daemon.log")
+    with log_path.open("a") as log_file:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "daemon", "--config", str(config), *(extra_args or [])],
+            cwd=REPO, env={**os.environ, **(env or {})}, stdout=log_file,
+            stderr=subprocess.STDOUT, text=True)
     try:
         yield proc
+    except BaseException:
+        print(f"--- the daemon's log ({log_path}), last lines:")
+        print("\n".join(log_path.read_text(errors="replace").splitlines()[-60:]))
+        raise
     finally:
         if proc.poll() is None:
             proc.send_signal(signal.SIGKILL)

@@ -103,8 +103,18 @@ def base_component(make_base: Callable[[], Base], timeout_s: float,
                    sink: Callable[[list[Odometry]], None], health: Callable[[], ComponentHealth],
                    taps: Sequence[Callable[[list[Odometry], Base], None]],
                    on_open: Callable[[], None] | None = None) -> DeviceComponent:
-    """The base device; ``on_open`` is told each time it is (re)opened: its odometry may
-    then start from anywhere."""
+    """The base device; ``on_open`` is told each time it is re-opened into an odometry
+    frame that may start from anywhere (not the first time, and not for a base whose
+    odometry survives a re-open)."""
+    opened = [0]
+
+    def reopened() -> None:
+        opened[0] += 1
+        device = component.device
+        kept = device is not None and device.info.odometry_kept_on_reopen
+        if opened[0] > 1 and not kept and on_open is not None:
+            on_open()
+
     def deliver(samples: list[Odometry], base: Base) -> int:
         for tap in taps:
             tap(samples, base)
@@ -112,7 +122,8 @@ def base_component(make_base: Callable[[], Base], timeout_s: float,
         health().detail["flags"] = base.status().to_flags()
         return len(samples)
 
-    return DeviceComponent("base", make_base, timeout_s, deliver, health, on_open)
+    component = DeviceComponent("base", make_base, timeout_s, deliver, health, reopened)
+    return component
 
 
 class ProcessingComponent:

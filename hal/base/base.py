@@ -35,6 +35,10 @@ class BaseInfo:
     device: str
     can_move: bool
     odometry_rate_hz: float
+    # True when a re-opened link reads on in the same odometry frame (the simulated robot
+    # lives on in the process); False when it may start from anywhere (a base power-cycled
+    # while the link was down, a replay started again).
+    odometry_kept_on_reopen: bool = False
 
 
 @runtime_checkable

@@ -28,7 +28,7 @@ class SimBase:
     @property
     def info(self) -> BaseInfo:
         return BaseInfo("sim", "simulated holonomic base", self._settings.can_move,
-                        self._settings.odometry_rate_hz)
+                        self._settings.odometry_rate_hz, odometry_kept_on_reopen=True)
 
     def _open_robot(self) -> SimRobot:
         if self._robot is None:

@@ -336,7 +336,7 @@ class SimRobot:
         self.advance_to(due)
         with self._lock:
             self._next_frame_ns = (self._t_ns // self._frame_ns + 1) * self._frame_ns
-            return self.render_frame()
+        return self.render_frame()
 
     def render_frame(self) -> Frame:
         """The raw donut at the current simulated time."""
@@ -353,7 +353,10 @@ class SimRobot:
                     else noise
                 blur = self.scenario.blur_sigma_px if self.scenario.blur_sigma_px is not None \
                     else blur
-            image = self.renderer.donut(self._pose, people=people, gain=gain, noise_sigma=noise,
-                                        blur_sigma_px=blur, rng=self._camera_rng)
+            pose, stamp_ns = self._pose, self.now_ns()
             self._frame_seq += 1
-            return Frame(image=image, stamp_ns=self.now_ns(), seq=self._frame_seq)
+            seq = self._frame_seq
+        # Rendered outside the lock: odometry goes on while the camera renders.
+        image = self.renderer.donut(pose, people=people, gain=gain, noise_sigma=noise,
+                                    blur_sigma_px=blur, rng=self._camera_rng)
+        return Frame(image=image, stamp_ns=stamp_ns, seq=seq)
