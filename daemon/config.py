@@ -48,6 +48,9 @@ class ZenohSettings:
 @dataclass(frozen=True)
 class MapSettings:
     path: str = setting("var/placecell.db", doc="SQLite map file")
+    resume: bool = setting(True, doc="start from the pose saved at the last stop")
+    save_pose_period_s: float = setting(2.0, gt=0.0, le=3600.0,
+                                        doc="save the tracked pose this often (and on stop)")
 
 
 @dataclass(frozen=True)

@@ -56,14 +56,20 @@ def dump_toml(data: dict[str, Any], prefix: str = "") -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_config(tmp: Path, overrides: dict[str, Any] | None = None) -> tuple[Path, int]:
-    """The default configuration with a free zenoh port, a private map, and ``overrides``."""
+def write_config(tmp: Path, overrides: dict[str, Any] | None = None, *,
+                 demo: bool = False) -> tuple[Path, int]:
+    """The default configuration with a free zenoh port, a private map, and ``overrides``;
+    unless ``demo`` (what ``make run`` shows), a still robot that learns no place on its
+    own."""
     port = free_port()
     data = tomllib.loads(DEFAULT_CONFIG.read_text())
     data = _merge(data, {
         "zenoh": {"listen": [f"tcp/127.0.0.1:{port}"]},
         "map": {"path": str(tmp / "map.db")},
     })
+    if not demo:
+        data = _merge(data, {"sim": {"scenario": ""},
+                             "mapping": {"acquisition": {"enabled": False}}})
     data = _merge(data, overrides or {})
     path = tmp / "placecell.toml"
     path.write_text(dump_toml(data))
@@ -103,6 +109,16 @@ def client_session(port: int) -> zenoh.Session:
     conf.insert_json5("mode", '"peer"')
     conf.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')
     conf.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(conf)
+
+
+def listening_session(port: int) -> zenoh.Session:
+    """A session listening on 127.0.0.1:``port`` for a daemon configured to connect to
+    it: up before the daemon starts, it hears the daemon's very first messages."""
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
     conf.insert_json5("scouting/multicast/enabled", "false")
     return zenoh.open(conf)
 

@@ -9,9 +9,11 @@ from daemon.config import PlacecellConfig, load
 
 
 def lockstep_config(**sim: Any) -> PlacecellConfig:
-    """The built-in configuration with the simulator in lock-step mode."""
+    """The built-in configuration with the simulator in lock-step mode, the robot still
+    (no scenario) unless one is given."""
     c = load(None)
-    return dataclasses.replace(c, sim=dataclasses.replace(c.sim, **{"realtime": False, **sim}))
+    return dataclasses.replace(c, sim=dataclasses.replace(
+        c.sim, **{"realtime": False, "scenario": "", **sim}))
 
 
 def with_sections(config: PlacecellConfig, **sections: dict[str, Any]) -> PlacecellConfig:

@@ -8,17 +8,23 @@ from __future__ import annotations
 import bisect
 import json
 import math
+import signal
 import subprocess
 import time
 from pathlib import Path
 from typing import Any
 
+import cv2
+import numpy as np
 import pytest
 
 from kernel.se2 import SE2
+from tests.api_schema import Messages, check
 from tests.daemon_harness import (
     REPO,
     client_session,
+    free_port,
+    listening_session,
     running_daemon,
     venv_bin,
     wait_for,
@@ -88,7 +94,8 @@ def _learn_popen(config: Path, label: str) -> subprocess.Popen[str]:
 
 
 def _lines(out: str) -> list[dict[str, Any]]:
-    return [json.loads(line) for line in out.splitlines() if line.strip()]
+    """placecellctl's --json output, each object checked against its schema."""
+    return [check(json.loads(line)) for line in out.splitlines() if line.strip()]
 
 
 def _transitions(port: int) -> list[dict[str, Any]]:
@@ -100,7 +107,7 @@ def _transitions(port: int) -> list[dict[str, Any]]:
     finally:
         session.close()
     assert replies, "no answer on map/transitions"
-    return list(replies[0]["transitions"])
+    return list(check(replies[0])["transitions"])
 
 
 def _start(tmp: Path, drift: dict[str, float] | None) -> tuple[Path, int, Truth]:
@@ -115,7 +122,7 @@ def _wait_ready(config: Path) -> None:
         st = _ctl(config, "status", "--json", timeout=30)
         if st.returncode != 0:
             return False
-        status = json.loads(st.stdout)
+        status = check(json.loads(st.stdout))
         return bool(status["healthy"]) and status["rates"]["frames_hz"] > 0 \
             and status["rates"]["odometry_hz"] > 0
     assert wait_for(ready, 90, interval_s=0.5), "the daemon never delivered frames"
@@ -151,6 +158,44 @@ def _learn_two(config: Path, truth: Truth) -> tuple[dict[str, Any], dict[str, An
     return dock, door
 
 
+def _localisation_mode_refuses_learning(config: Path) -> None:
+    """cmd/mode (design §11): in localisation mode the map is read-only."""
+    assert check(json.loads(_ctl(config, "mode", "--json").stdout))["mode"] == "mapping"
+    switched = _ctl(config, "mode", "localisation", "--json")
+    assert switched.returncode == 0
+    assert check(json.loads(switched.stdout))["mode"] == "localisation"
+    refused = _ctl(config, "learn", "--label", "nope")
+    assert refused.returncode == 4 and "localisation mode" in refused.stderr, refused.stderr
+    bad = _ctl(config, "mode", "surveying")
+    assert bad.returncode == 2  # argparse: not a mode
+    back = _ctl(config, "mode", "mapping", "--json")
+    assert back.returncode == 0 and check(json.loads(back.stdout))["mode"] == "mapping"
+
+
+def _place_and_panorama(config: Path, port: int, place_id: int) -> None:
+    """map/place/<id> and map/place/<id>/panorama: a PNG of the reference panorama with
+    its landmarks drawn."""
+    png_path = config.with_name("dock.png")
+    shown = _ctl(config, "place", str(place_id), "--panorama", str(png_path), "--json")
+    assert shown.returncode == 0, shown.stderr
+    info = check(json.loads(shown.stdout))
+    assert info["label"] == "dock" and len(info["landmarks"]) == 16
+    assert {t["to"] for t in info["transitions"]} == {place_id + 1}
+    image = cv2.imread(str(png_path), cv2.IMREAD_COLOR)
+    assert image is not None and image.shape == (2 * 120, 2 * 720, 3)
+    # The landmarks are outlined in yellow: some pixels are exactly (0, 255, 255).
+    assert int(np.all(image == (0, 255, 255), axis=2).sum()) > 16 * 60
+    missing = _ctl(config, "place", "99")
+    assert missing.returncode == 4 and "not in the map" in missing.stderr
+    session = client_session(port)
+    try:
+        bad = [json.loads(r.ok.payload.to_bytes()) for r in session.get(
+            "placecell/e2e/map/place/x/panorama", timeout=5.0) if r.ok is not None]
+    finally:
+        session.close()
+    assert bad and check(bad[0])["code"] == "bad_request", bad
+
+
 def _transition_error(port: int, truth: Truth, dock: dict[str, Any], door: dict[str, Any]
                       ) -> tuple[SE2, SE2, list[list[float]]]:
     ids = (dock["place"]["id"], door["place"]["id"])
@@ -161,6 +206,7 @@ def _transition_error(port: int, truth: Truth, dock: dict[str, Any], door: dict[
     return measured, true, forward["covariance"]
 
 
+@pytest.mark.timeout(300)  # three daemon runs: learning, tracking, resuming
 def test_learn_two_places_then_track_from_one_to_the_other(tmp_path: Path) -> None:
     """Design §6-8: two places learned without drift give a transition matching the truth;
     then a restarted daemon, told it stands at the first place, tracks the robot driven
@@ -168,13 +214,24 @@ def test_learn_two_places_then_track_from_one_to_the_other(tmp_path: Path) -> No
     config, port, truth = _start(tmp_path, NO_DRIFT)
     with running_daemon(config):
         _wait_ready(config)
-        dock, door = _learn_two(config, truth)
+        watcher = client_session(port)
+        try:
+            published = Messages(watcher, "e2e")
+            _localisation_mode_refuses_learning(config)
+            dock, door = _learn_two(config, truth)
+            _place_and_panorama(config, port, dock["place"]["id"])
+            counts = published.check_all()  # every message validates against docs/api
+        finally:
+            watcher.close()
+        assert {"pose", "belief", "status", "events"} <= set(counts), counts
+        assert counts["pose"] > 300, counts
         measured, true, _ = _transition_error(port, truth, dock, door)
         assert math.hypot(true.x, true.y) > 2.0
         assert math.hypot(measured.x - true.x, measured.y - true.y) <= 0.02
         assert abs(math.degrees(math.remainder(measured.yaw - true.yaw, 2 * math.pi))) <= 0.5
         places = _ctl(config, "places", "--json")
-        assert [p["label"] for p in json.loads(places.stdout)["places"]] == ["dock", "door"]
+        listed = check(json.loads(places.stdout))["places"]
+        assert [p["label"] for p in listed] == ["dock", "door"]
     references = {dock["place"]["id"]: truth.at(dock["place"]["reference_stamp_ns"]),
                   door["place"]["id"]: truth.at(door["place"]["reference_stamp_ns"])}
     _track_dock_to_door(tmp_path, references, dock["place"]["id"], door["place"]["id"])
@@ -194,7 +251,7 @@ def _track_dock_to_door(tmp: Path, references: dict[int, SE2], dock: int, door: 
         f"waypoints = [[{goal.x}, {goal.y}]]\n")
     config, _ = write_config(tmp, {"robot": {"name": "e2e"}, "sim": {
         "scenario": str(scenario), "truth_out": str(truth.path)}})
-    with running_daemon(config):
+    with running_daemon(config) as daemon:
         _wait_ready(config)
         before = _ctl(config, "pose", "--json", timeout=30)
         assert before.returncode == 0, before.stderr
@@ -222,6 +279,8 @@ def _track_dock_to_door(tmp: Path, references: dict[int, SE2], dock: int, door: 
         finally:
             follower.terminate()
             follower.wait(timeout=30)
+        daemon.send_signal(signal.SIGTERM)  # as systemd stops it: the pose is saved
+        assert daemon.wait(30) == 0
         poses = _lines(pose_file.read_text())
     samples = truth.samples()
     moving = [t for t, *_ in samples if math.dist(_[0:2], samples[0][1:3]) > 1e-3]
@@ -239,6 +298,49 @@ def _track_dock_to_door(tmp: Path, references: dict[int, SE2], dock: int, door: 
         true_in_place = references[p["place"]["id"]].between(truth.at(p["stamp_ns"]))
         errors.append(math.hypot(p["x"] - true_in_place.x, p["y"] - true_in_place.y))
     assert max(errors) <= 0.10, (max(errors), sum(errors) / len(errors))
+    stopped = poses[-1]
+    assert stopped["state"] == "tracking" and stopped["place"]["id"] == door
+    _resume_after_restart(tmp, truth.samples()[-1][1:], stopped)
+
+
+def _resume_after_restart(tmp: Path, true_pose: tuple[float, ...], stopped: dict[str, Any]
+                          ) -> None:
+    """Design §11: the pose saved on SIGTERM is where the next start resumes — reported
+    ``relocalising`` until the view confirms it, ``tracking`` within 20 frames, in the
+    same place, within 0.10 m of where it stopped. The robot stays where it stood: the
+    new simulation starts it there; the daemon knows only its map file."""
+    scenario = tmp / "after-restart.toml"
+    scenario.write_text(f'name = "after-restart"\nworld = "generate:office:1"\n'
+                        f"start_pose = [{true_pose[0]}, {true_pose[1]}, {true_pose[2]}]\n")
+    listen = free_port()
+    config, _ = write_config(tmp, {"robot": {"name": "e2e"}, "sim": {
+        "scenario": str(scenario), "truth_out": ""}, "zenoh": {
+        "connect": [f"tcp/127.0.0.1:{listen}"]}})
+    session = listening_session(listen)  # up first: it hears the first poses
+    poses: list[dict[str, Any]] = []
+    events: list[dict[str, Any]] = []
+    session.declare_subscriber("placecell/e2e/pose",
+                               lambda s: poses.append(json.loads(s.payload.to_bytes())))
+    session.declare_subscriber("placecell/e2e/events",
+                               lambda s: events.append(json.loads(s.payload.to_bytes())))
+    try:
+        with running_daemon(config):
+            assert wait_for(lambda: any(p["state"] == "tracking" for p in poses)
+                            and len(poses) >= 30, 120, 0.2), poses[-3:]
+    finally:
+        session.close()
+    first = next(i for i, p in enumerate(poses) if p["state"] == "tracking")
+    assert poses[0]["state"] == "relocalising", poses[0]
+    assert "saved at the last stop" in poses[0]["reason"], poses[0]
+    assert first < 20, (first, [p["state"] for p in poses[:25]])
+    resumed = poses[first]
+    assert resumed["place"]["id"] == stopped["place"]["id"]
+    moved = math.hypot(resumed["x"] - stopped["x"], resumed["y"] - stopped["y"])
+    assert moved <= 0.10, (moved, resumed, stopped)
+    for message in poses + events:
+        check(message)
+    relocalised = [e for e in events if e["event"] == "relocalised"]
+    assert relocalised and relocalised[0]["how"] == "resumed", events
 
 
 def test_default_drift_inside_2_sigma_and_abort_stops_the_robot(tmp_path: Path) -> None:
@@ -310,21 +412,53 @@ def test_learning_is_refused_with_the_reason(tmp_path: Path, overrides: dict[str
         assert json.loads(places.stdout)["places"] == []
 
 
-def test_autonomous_acquisition_learns_places_as_the_robot_tours(tmp_path: Path) -> None:
-    scenario = tmp_path / "tour.toml"
-    scenario.write_text('name = "tour"\nworld = "generate:open-room:1"\n[trajectory]\n'
-                        'kind = "tour"\nspeed = 0.3\nresume_after_s = 1.0\n')
-    config, port = write_config(tmp_path, {"robot": {"name": "e2e"}, "sim": {
-        "scenario": str(scenario)}, "mapping": {"acquisition": {"enabled": True}}})
+@pytest.mark.timeout(300)
+def test_make_run_learns_places_on_its_own_and_tracks_within_two_minutes(
+        tmp_path: Path) -> None:
+    """What a newcomer's ``make run`` shows (README): the default configuration, only the
+    map file and the zenoh port private — the robot tours the office, places are learned
+    on its own (design §6), and the pose is tracked from place to place."""
+    config, port = write_config(tmp_path, {"robot": {"name": "e2e"}}, demo=True)
+    started = time.monotonic()
     with running_daemon(config):
-        _wait_ready(config)
+        pose_file = tmp_path / "poses.jsonl"
+        with pose_file.open("w") as sink:
+            follower = subprocess.Popen(
+                [venv_bin("placecellctl"), "--config", str(config), "pose", "--follow",
+                 "--json", "--duration", "150"], cwd=REPO, stdout=sink,
+                stderr=subprocess.STDOUT, text=True)
 
         def places() -> list[dict[str, Any]]:
             out = _ctl(config, "places", "--json", timeout=30)
-            return list(json.loads(out.stdout)["places"]) if out.returncode == 0 else []
+            return list(check(json.loads(out.stdout))["places"]) if out.returncode == 0 \
+                else []
 
-        assert wait_for(lambda: len(places()) >= 2, 180, 1.0), places()
+        def tracking() -> bool:
+            return any(p.get("state") == "tracking" for p in _read_lines(pose_file))
+
+        try:
+            assert wait_for(lambda: len(places()) >= 1 and tracking(),
+                            120 - (time.monotonic() - started), 1.0), places()
+            # Driving on, it learns the next place where the first one's view has faded,
+            # with the transition between them, and measures the first one's background.
+            assert wait_for(lambda: len(places()) >= 2
+                            and places()[0]["background_lrp"] is not None, 120, 1.0), places()
+        finally:
+            follower.terminate()
+            follower.wait(timeout=30)
         first = places()[0]
-        assert first["background_lrp"] is not None and 0.3 < first["background_lrp"] < 0.9
+        assert 0.3 < first["background_lrp"] < 0.9, first
         pairs = {(t["from"], t["to"]) for t in _transitions(port)}
         assert (1, 2) in pairs and (2, 1) in pairs
+    tracked = [p for p in _read_lines(pose_file) if p.get("state") == "tracking"]
+    assert {p["place"]["id"] for p in tracked} >= {1, 2}
+
+
+def _read_lines(path: Path) -> list[dict[str, Any]]:
+    out = []
+    for line in path.read_text().splitlines():
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue  # the line being written
+    return out

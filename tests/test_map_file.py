@@ -17,7 +17,7 @@ import pytest
 from daemon.mapping.settings import OdometryNoiseSettings
 from daemon.service.mapper import Mapper
 from daemon.store.export import export_map, import_map
-from daemon.store.sqlite_store import SCHEMA_VERSION, MapStore
+from daemon.store.sqlite_store import SCHEMA_VERSION, MapStore, SavedPose
 from daemon.vision.drawing import LANDMARK_COLOUR
 from kernel.errors import MapStoreError
 from kernel.se2 import SE2, UncertainSE2
@@ -175,6 +175,7 @@ def test_version_2_map_keeps_its_places_and_gains_background_estimates(tmp_path:
     db = sqlite3.connect(path)  # what a version 2 file holds: no background_estimate
     db.execute("ALTER TABLE places DROP COLUMN background_estimate")
     db.execute("ALTER TABLE places DROP COLUMN signature")
+    db.execute("DROP TABLE resume")
     db.execute("UPDATE meta SET value = '2' WHERE key = 'schema_version'")
     db.commit()
     db.close()
@@ -190,6 +191,24 @@ def test_version_2_map_keeps_its_places_and_gains_background_estimates(tmp_path:
         assert [p.background_estimate for p in mapper.graph.places] == estimates
         assert all(p.signature is not None and p.signature.shape == (144,)
                    for p in store.load().places)
+        assert store.saved_pose() is None  # v4's resume table, empty
+
+
+def test_the_saved_pose_survives_a_reopen_and_bad_ones_are_refused(tmp_path: Path) -> None:
+    path = tmp_path / "map.db"
+    cov = np.diag([0.0004, 0.0009, 0.0001])
+    with _two_places(path) as store:
+        assert store.saved_pose() is None
+        store.save_pose(SavedPose(1, (0.5, -0.25, 1.0), cov, 100.0))
+        store.save_pose(SavedPose(2, (0.1, 0.2, -0.3), cov, 200.0))  # replaces
+        with pytest.raises(MapStoreError, match="finite"):
+            store.save_pose(SavedPose(2, (float("nan"), 0.0, 0.0), cov, 300.0))
+        with pytest.raises(sqlite3.IntegrityError):  # a place the map does not hold
+            store.save_pose(SavedPose(9, (0.0, 0.0, 0.0), cov, 300.0))
+    with MapStore.open(path, GEOMETRY) as store:
+        saved = store.saved_pose()
+    assert saved is not None and saved.place_id == 2 and saved.saved_unix_s == 200.0
+    assert saved.pose == (0.1, 0.2, -0.3) and np.array_equal(saved.covariance, cov)
 
 
 def test_readers_are_not_blocked_by_the_writer(tmp_path: Path) -> None:

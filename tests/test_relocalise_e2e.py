@@ -12,27 +12,13 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
-from kernel.se2 import SE2
+from tests.conftest import OfficeMap
 from tests.daemon_harness import REPO, running_daemon, venv_bin, wait_for, write_config
 from tests.test_learn_e2e import Truth
-from tools.eval.lockstep import Run, lockstep_config
 
 START = (4.75, 10.15, 0.4)  # near place "b"
 KIDNAP_AT_S = 14.0
 RELEASE = (3.2, 9.85, -1.0)  # near place "a", turned
-
-
-def _map(path: Path) -> dict[str, SE2]:
-    """Three places 1.5 m apart along the office corridor, learned by the daemon's own
-    Turn Back and Look loop on the lock-step simulator; their true reference poses."""
-    with Run(lockstep_config(1, start_pose=(3.0, 10.0, 0.0)), map_path=path) as run:
-        labels = {}
-        for i, label in enumerate("abc"):
-            if i:
-                for _ in run.drive(1.5, 0.0, 0.0, 0.3):
-                    pass
-            labels[label] = run.learn(label).id
-        return {label: run.references[pid] for label, pid in labels.items()}
 
 
 def _scenario(tmp: Path) -> Path:
@@ -66,8 +52,9 @@ def _ctl(config: Path, *args: str) -> subprocess.CompletedProcess[str]:
                           cwd=REPO, capture_output=True, text=True, timeout=60)
 
 
-def test_the_daemon_localises_by_itself_and_recovers_from_a_kidnap(tmp_path: Path) -> None:
-    refs = _map(tmp_path / "map.db")
+def test_the_daemon_localises_by_itself_and_recovers_from_a_kidnap(
+        tmp_path: Path, office_map: OfficeMap) -> None:
+    refs = office_map(tmp_path / "map.db")
     truth = Truth(tmp_path / "truth.jsonl")
     config, _ = write_config(tmp_path, {"robot": {"name": "e2e"}, "mapping": {
         "mode": "localisation"}, "sim": {"scenario": str(_scenario(tmp_path)),

@@ -266,6 +266,58 @@ def cmd_pose(args: argparse.Namespace) -> int:
     return _follow(args, "pose", format_pose, silence_ok=False)
 
 
+def format_belief(b: dict[str, Any]) -> str:
+    scores = ", ".join(f"{sc['place']}: {sc['lead']:+.3f}" for sc in b.get("scores", [])[:5])
+    where = "" if b.get("place_id") is None else f" in place {b['place_id']}"
+    return (f"{b['state']}{where}: {b['reason'] or 'ok'}; confidence "
+            f"{b['confidence']:.2f}; leads over background {scores or 'none'}")
+
+
+def cmd_belief(args: argparse.Namespace) -> int:
+    """The localiser's belief (places scored, particles, timings): the next one, or every
+    one with --follow."""
+    return _follow(args, "belief", format_belief, silence_ok=False)
+
+
+def cmd_mode(args: argparse.Namespace) -> int:
+    """Report the daemon's mode, or switch it (mapping | localisation)."""
+    payload = json.dumps({"mode": args.mode}).encode() if args.mode else b""
+    return _command(args, "cmd/mode", payload, lambda r: f"mode: {r['mode']}")
+
+
+def cmd_place(args: argparse.Namespace) -> int:
+    """One place of the daemon's map; --panorama FILE saves its reference panorama with
+    the landmarks drawn (PNG)."""
+    session, robot = open_client(args)
+    key = zenoh_link.key(robot, f"map/place/{args.id}")
+    try:
+        info = query_json(session, key, args.timeout)
+        png = b""
+        if info and info[0].get("kind") != "error" and args.panorama:
+            png = next((r.ok.payload.to_bytes() for r in session.get(
+                f"{key}/panorama", timeout=args.timeout) if r.ok is not None), b"")
+    finally:
+        session.close()
+    if not info:
+        return _unreachable(args, key)
+    if info[0].get("kind") == "error":
+        return _error_exit(info[0], args.json)
+    if args.panorama:
+        if not png.startswith(b"\x89PNG"):
+            print(f"placecellctl: no panorama for place {args.id}", file=sys.stderr)
+            return EXIT_FAILED
+        Path(args.panorama).write_bytes(png)
+    p = info[0]
+    if args.json:
+        _print(p)
+    else:
+        links = ", ".join(f"{t['to']} ({t['source']})" for t in p["transitions"]) or "none"
+        print(f"place {p['id']} {p['label'] or '-'}: {len(p['landmarks'])} landmarks, "
+              f"transitions to {links}" + (f"; panorama in {args.panorama}"
+                                           if args.panorama else ""))
+    return EXIT_OK
+
+
 def format_event(e: dict[str, Any]) -> str:
     fields = ", ".join(f"{k} {v}" for k, v in e.items() if k not in ("schema", "event",
                                                                       "stamp_ns"))
@@ -387,6 +439,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_set_pose)
     for leaf, what, func in (("pose", "the robot's pose in the current place", cmd_pose),
+                             ("belief", "the localiser's belief: places scored, timings",
+                              cmd_belief),
                              ("events", "the daemon's events (learned, lost, relocalised...)",
                               cmd_events)):
         p = sub.add_parser(leaf, help=what)
@@ -400,6 +454,16 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("relocalise", help="forget the pose and search the whole map")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_relocalise)
+    p = sub.add_parser("mode", help="show or switch the mode (mapping: places may be "
+                       "learned; localisation: the map is read-only)")
+    p.add_argument("mode", nargs="?", choices=["mapping", "localisation"])
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_mode)
+    p = sub.add_parser("place", help="one place of the daemon's map")
+    p.add_argument("id", type=int)
+    p.add_argument("--panorama", metavar="FILE", help="save its panorama, landmarks drawn")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_place)
     p = sub.add_parser("places", help="the places of the daemon's map")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_places)

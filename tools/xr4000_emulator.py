@@ -71,8 +71,9 @@ def main(argv: list[str] | None = None) -> int:
             source: SimSource | RecordingSource = RecordingSource(args.recording)
         else:
             scenario = load_scenario(args.scenario) if args.scenario else None
-            config = dataclasses.replace(config, sim=dataclasses.replace(config.sim,
-                                                                         realtime=True))
+            # Without --scenario the base waits for commands (not the configuration's demo).
+            config = dataclasses.replace(config, sim=dataclasses.replace(
+                config.sim, realtime=True, scenario=""))
             source = SimSource(build_sim_robot(config, scenario, camera=False))
         if args.serial:
             side: SerialSide | CanSide = SerialSide(args.serial)

@@ -24,6 +24,7 @@ generator is seeded from the settings.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
@@ -83,6 +84,7 @@ class PoseRequest:
     pose: tuple[float, float, float]
     sigma_xy: float
     sigma_yaw: float
+    confirm: str | None = None  # None: the operator knows; else how the pose came (resumed)
 
 
 class Localiser:
@@ -127,6 +129,7 @@ class Localiser:
         self._step = 0  # the recovery step under way (mode "recover")
         self._mode_frames = 0  # frames in this mode or recovery step
         self._episode: tuple[int, int] | None = None  # (stamp, frame) the loss or search began
+        self._confirming = "global"  # how the place being confirmed was chosen
 
     # ------------------------------------------------------------------ the map
     def know_place(self, place: Place) -> None:
@@ -175,6 +178,16 @@ class Localiser:
             place_id, (float(pose[0]), float(pose[1]), float(pose[2])),
             s.initial_sigma_xy_m if sigma_xy is None else float(sigma_xy),
             s.initial_sigma_yaw_rad if sigma_yaw is None else float(sigma_yaw))
+
+    def resume(self, place_id: int, pose: tuple[float, float, float], sigma_xy: float,
+               sigma_yaw: float) -> None:
+        """Start from the pose saved when the daemon last stopped (design §11): tracked
+        at once, but ``relocalising`` until the view confirms it as it confirms a global
+        pick (event ``relocalised``, how ``resumed``); not confirmed within
+        ``confirm_frames``, the whole map is searched without that place first."""
+        self.set_pose(place_id, pose, sigma_xy, sigma_yaw)
+        assert self._pose_request is not None
+        self._pose_request = dataclasses.replace(self._pose_request, confirm="resumed")
 
     def relocalise(self) -> None:
         """Forget the pose and search the whole map from the next frame on (cmd/relocalise).
@@ -330,7 +343,7 @@ class Localiser:
             return scored, event
         if self.mode == "confirm":
             if found:
-                return scored, self._relocalised(current, "global", stamp_ns)
+                return scored, self._relocalised(current, self._confirming, stamp_ns)
             if self._mode_frames >= self.settings.confirm_frames or lost_now:
                 self._begin_search(stamp_ns, rejected={current}, keep_episode=True)
             return scored, None
@@ -386,7 +399,7 @@ class Localiser:
                                self.rng)
         tracker.start_anywhere(grey, self.settings.recovery_sigma_m)
         self.tracker, self._closure = tracker, None
-        self.mode, self._mode_frames = "confirm", 0
+        self.mode, self._mode_frames, self._confirming = "confirm", 0, "global"
         self.loss.reset()
 
     def _recover(self, grey: np.ndarray, step: int) -> None:
@@ -420,9 +433,13 @@ class Localiser:
                                     self.model, self.rng)
         self.tracker.start(grey, request.pose, request.sigma_xy, request.sigma_yaw)
         self._closure = None
-        self.mode, self._mode_frames, self._episode = "track", 0, None  # the operator knows
         self.loss.reset()
         self.search.reset(None)
+        if request.confirm is None:
+            self.mode, self._mode_frames, self._episode = "track", 0, None  # operator knows
+        else:
+            self.mode, self._mode_frames, self._confirming = "confirm", 0, request.confirm
+            self._episode = (self._last_stamp_ns or 0, self._frames)
         return True
 
     def _recognise(self, prepared: PreparedPanorama, grey: np.ndarray, odo: Odometry | None
@@ -535,8 +552,10 @@ class Localiser:
         state: BeliefState = "tracking"
         reason = f"tracking in place {place}"
         if self.mode == "confirm":
-            state, reason = "relocalising", (f"global relocalisation chose place {place}; "
-                                             "waiting for a reliable estimate")
+            chose = f"resumed in place {place} from the pose saved at the last stop" \
+                if self._confirming == "resumed" else \
+                f"global relocalisation chose place {place}"
+            state, reason = "relocalising", f"{chose}; waiting for a reliable estimate"
         elif self.mode == "recover":
             state = "lost"
             reason = (f"lost in place {place}: recovery step {self._step} of 3 ("

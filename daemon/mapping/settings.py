@@ -87,7 +87,7 @@ class AcquisitionSettings:
     """When to learn a new place on the robot's own (design §6, thesis §7.1): the LRP of the
     most recent place, smoothed against distance travelled, has settled at its background."""
 
-    enabled: bool = setting(False, doc="learn places on the robot's own in mapping mode")
+    enabled: bool = setting(True, doc="learn places on the robot's own in mapping mode")
     sample_step_m: float = setting(0.05, gt=0.0, le=1.0, doc="the LRP is sampled every this "
                                    "far travelled (frames while stationary or only turning "
                                    "add nothing)")

@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar
 
 from daemon.service import zenoh_link
 from kernel.errors import ConfigError, PlacecellError
@@ -55,6 +55,12 @@ class AbortRequest:
 
 
 @dataclass(frozen=True)
+class NoParameters:
+    """The queries that take none (status, map/...): an empty payload or ``{}``;
+    anything else is refused, as every request with a key it does not know."""
+
+
+@dataclass(frozen=True)
 class RelocaliseRequest:
     """cmd/relocalise: forget the pose and search the whole map (design §9)."""
 
@@ -78,6 +84,15 @@ class SetPoseRequest:
             raise ValueError("place is required: the id of the place the pose is in")
 
 
+@dataclass(frozen=True)
+class ModeRequest:
+    """cmd/mode: ``mapping`` (places may be learned) or ``localisation`` (the map is
+    read-only); empty: only report the mode (design §11)."""
+
+    mode: Literal["", "mapping", "localisation"] = setting(
+        "", doc="the mode to switch to; empty: report the current one")
+
+
 R = TypeVar("R")
 
 
@@ -94,6 +109,9 @@ def parse(cls: type[R], payload: bytes | None, what: str) -> R:
             table = json.loads(raw.decode("utf-8"))
         except (UnicodeDecodeError, json.JSONDecodeError) as e:
             raise RequestError(ErrorCode.BAD_REQUEST, f"{what}: not a JSON object ({e})"
+                               ) from e
+        except RecursionError as e:  # "[[[[..." nested deeper than the parser goes
+            raise RequestError(ErrorCode.BAD_REQUEST, f"{what}: JSON nested too deeply"
                                ) from e
     if not isinstance(table, dict):
         raise RequestError(ErrorCode.BAD_REQUEST, f"{what}: expected a JSON object, got "

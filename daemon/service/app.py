@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import platform
 import signal
+import sqlite3
 import threading
 import time
 from typing import Any
@@ -17,6 +19,7 @@ import zenoh
 import daemon
 from daemon.config import PlacecellConfig
 from daemon.localisation.localiser import Belief, Localiser
+from daemon.mapping.place import Place
 from daemon.mapping.transition import Transition
 from daemon.service import api, zenoh_link
 from daemon.service.components import (
@@ -37,13 +40,18 @@ from daemon.service.mapper import Mapper, Seen
 from daemon.service.notify import Notifier
 from daemon.service.pipeline import make_localiser
 from daemon.service.supervisor import Supervisor, describe
-from daemon.store.sqlite_store import MapStore
+from daemon.store.sqlite_store import MapStore, SavedPose
+from daemon.vision.drawing import draw_landmarks
 from daemon.vision.unwarp import Unwarper
 from hal.registry import HalContext, create_base, create_camera
 from kernel.errors import PlacecellError
 from kernel.panorama import geometry_checksum
 
 log = logging.getLogger(__name__)
+
+# A resumed pose is spread at least this much: the robot may have been pushed while off.
+RESUME_MIN_SIGMA_M = 0.05
+RESUME_MIN_SIGMA_RAD = 0.05
 
 
 class Daemon:
@@ -75,6 +83,9 @@ class Daemon:
         self._job: LearnJob | None = None
         self._queryables: list[Any] = []
         self._acquire_after = 0.0  # monotonic s: no autonomous learning before
+        self.mode = config.mapping.mode  # cmd/mode changes it until the daemon stops
+        self._tracked: SavedPose | None = None  # the last pose tracked, to save
+        self._saved: SavedPose | None = None  # the one saved last
         self.supervisor = Supervisor(
             config.service.restart_backoff_initial_s, config.service.restart_backoff_max_s,
             on_event=self.publish_event,
@@ -99,9 +110,10 @@ class Daemon:
         self.base = base_component(
             lambda: create_base(cfg.base, self.hal), cfg.base.read_timeout_s, inbox.put,
             lambda: sup.health["base"], odo_taps, on_open=self.mapper.odometry_restarted)
-        acquisition = cfg.mapping.acquisition if cfg.mapping.mode == "mapping" else None
+        # Built whatever the mode: cmd/mode may switch to mapping; nothing is learned or
+        # stored while the mode is localisation (_maybe_acquire).
         self.processing = ProcessingComponent(
-            lambda: self._localiser(acquisition),
+            lambda: self._localiser(cfg.mapping.acquisition),
             mailbox, inbox, self._on_belief, lambda: sup.health["processing"],
             odometry_taps=[self.mapper.on_odometry, self._job_odometry],
             frame_taps=[self._job_frame])
@@ -114,7 +126,37 @@ class Daemon:
         last = self.mapper.last_place
         if last is not None:  # a restarted processing component goes on watching it
             localiser.watch_place(self.mapper.graph.place(last))
+        saved = self._saved_pose()
+        if saved is not None and not self.config.localisation.initial_place:
+            cov = saved.covariance
+            localiser.resume(saved.place_id, saved.pose,
+                             max(math.sqrt(max(cov[0, 0], cov[1, 1])), RESUME_MIN_SIGMA_M),
+                             max(math.sqrt(cov[2, 2]), RESUME_MIN_SIGMA_RAD))
+            log.info("resuming in place %d at (%.3f, %.3f, %.3f), saved %.0f s ago",
+                     saved.place_id, *saved.pose, time.time() - saved.saved_unix_s)
         return localiser
+
+    def _saved_pose(self) -> SavedPose | None:
+        """Where to resume: the pose tracked last in this run, else the map file's."""
+        if not self.config.map.resume:
+            return None
+        if self._tracked is not None:
+            return self._tracked
+        try:
+            return self.map.saved_pose()
+        except PlacecellError as e:
+            log.error("not resuming: %s", e)
+            return None
+
+    def _save_pose(self) -> None:
+        tracked = self._tracked
+        if tracked is None or tracked is self._saved:
+            return
+        try:
+            self.map.save_pose(tracked)
+            self._saved = tracked
+        except (PlacecellError, sqlite3.Error) as e:
+            log.error("could not save the pose: %s", e)
 
     def _record_odometry(self, samples: list[Any], base: Any) -> None:
         for s in samples:
@@ -134,14 +176,17 @@ class Daemon:
                               ("cmd/abort", self._answer_abort),
                               ("cmd/set_pose", self._answer_set_pose),
                               ("cmd/relocalise", self._answer_relocalise),
+                              ("cmd/mode", self._answer_mode),
                               ("map/places", self._answer_places),
-                              ("map/transitions", self._answer_transitions)):
+                              ("map/transitions", self._answer_transitions),
+                              ("map/place/**", self._answer_place)):
             self._queryables.append(s.declare_queryable(
                 zenoh_link.key(self.robot, leaf), _guarded(leaf, handler)))
         log.info("zenoh session %s: listening on %s, connecting to %s, multicast scouting %s",
                  s.zid(), z.listen, z.connect, "on" if z.multicast_scouting else "off")
 
     def _answer_status(self, query: zenoh.Query) -> None:
+        api.parse(api.NoParameters, _payload(query), "status")
         query.reply(query.key_expr, self.status_payload())
 
     # ------------------------------------------------------------------ learning
@@ -169,11 +214,13 @@ class Daemon:
         """Learn a place on the robot's own (design §6): the first one as soon as the robot
         can learn, then each time the last place's LRP has settled at its background."""
         acq = self.config.mapping.acquisition
+        if self.mode != "mapping":
+            return  # the map is read-only
         for place_id, background in belief.backgrounds:
             self.mapper.set_background(place_id, background)
             self.publish_event("background_measured", place=place_id,
                                background_lrp=round(background, 4))
-        if not acq.enabled or self.config.mapping.mode != "mapping" or self._job is not None \
+        if not acq.enabled or self._job is not None \
                 or not belief.odometry_ok or time.monotonic() < self._acquire_after:
             return
         decision = belief.acquisition
@@ -201,7 +248,7 @@ class Daemon:
             self._acquire_after = time.monotonic() + 10.0
 
     def _start_learning(self, request: api.LearnRequest, reply: Any) -> LearnJob:
-        if self.config.mapping.mode != "mapping":
+        if self.mode != "mapping":
             raise api.RequestError(api.ErrorCode.REFUSED, "the daemon is in localisation "
                                    "mode: the map is read-only, no places are learned")
         device = self.base.device
@@ -308,14 +355,56 @@ class Daemon:
         query.reply(query.key_expr, api.result(relocalising=True,
                                                places=self.mapper.place_count()))
 
+    def _answer_mode(self, query: zenoh.Query) -> None:
+        """cmd/mode: switch between mapping and localisation (design §11); refused while
+        a place is being learned (abort it first)."""
+        request = api.parse(api.ModeRequest, _payload(query), "mode")
+        if request.mode and request.mode != self.mode:
+            with self._job_lock:
+                if self._job is not None:
+                    raise api.RequestError(api.ErrorCode.BUSY, "a place is being learned: "
+                                           "wait for it or send cmd/abort, then switch")
+                previous, self.mode = self.mode, request.mode
+            log.info("mode %s -> %s at the operator's request", previous, self.mode)
+            self.publish_event("mode_changed", mode=self.mode, previous=previous)
+        query.reply(query.key_expr, api.result(mode=self.mode))
+
     # ------------------------------------------------------------------ map
+    def _answer_place(self, query: zenoh.Query) -> None:
+        """map/place/<id> (metadata) and map/place/<id>/panorama (PNG, landmarks drawn)."""
+        api.parse(api.NoParameters, _payload(query), "map/place")
+        prefix = zenoh_link.key(self.robot, "map/place/")
+        rest = str(query.key_expr).removeprefix(prefix).split("/")
+        if len(rest) not in (1, 2) or (len(rest) == 2 and rest[1] != "panorama") \
+                or not rest[0].isdigit():
+            raise api.RequestError(api.ErrorCode.BAD_REQUEST, f"{query.key_expr}: ask for "
+                                   f"{prefix}<id> or {prefix}<id>/panorama")
+        place_id = int(rest[0])
+        if not self.mapper.has_place(place_id):
+            raise api.RequestError(api.ErrorCode.NOT_FOUND, f"place {place_id} is not in "
+                                   f"the map ({self.mapper.place_count()} places)")
+        if len(rest) == 2:
+            place = self.mapper.place(place_id, panorama=True)
+            assert place.reference_panorama is not None
+            ok, png = cv2.imencode(".png", draw_landmarks(place.reference_panorama,
+                                                         place.landmarks))
+            if not ok:
+                raise api.RequestError(api.ErrorCode.FAILED, "could not encode the PNG")
+            query.reply(query.key_expr, png.tobytes(), encoding=zenoh.Encoding.IMAGE_PNG)
+            return
+        query.reply(query.key_expr, zenoh_link.encode(
+            "placecell.place", _place_body(self.mapper.place(place_id),
+                                           self.mapper.neighbours(place_id))))
+
     def _answer_places(self, query: zenoh.Query) -> None:
+        api.parse(api.NoParameters, _payload(query), "map/places")
         places = [{"id": p.id, "label": p.label, "created_unix_s": p.created_unix_s,
                    "landmarks": p.landmark_count, "background_lrp": p.background_lrp}
                   for p in self.mapper.summaries()]
         query.reply(query.key_expr, zenoh_link.encode("placecell.places", {"places": places}))
 
     def _answer_transitions(self, query: zenoh.Query) -> None:
+        api.parse(api.NoParameters, _payload(query), "map/transitions")
         out = []
         for t in self.mapper.transitions():
             m = t.T_from_to.mean
@@ -340,6 +429,10 @@ class Daemon:
     def _on_belief(self, belief: Belief) -> None:
         self._belief = belief
         self._belief_received_ns = time.monotonic_ns()
+        if belief.state == "tracking" and belief.place_id is not None \
+                and belief.pose_in_place is not None and belief.covariance is not None:
+            self._tracked = SavedPose(belief.place_id, belief.pose_in_place,
+                                      np.array(belief.covariance).reshape(3, 3), time.time())
         body = _belief_body(belief)
         self.publish("pose", zenoh_link.encode("placecell.pose", _pose_body(belief)))
         self.publish("belief", zenoh_link.encode("placecell.belief", body))
@@ -361,7 +454,7 @@ class Daemon:
 
     def _store_cycle(self, transition: Transition) -> None:
         """A cycle closed by local estimates in both places (design §6, §7.1.3)."""
-        if self.config.mapping.mode != "mapping":
+        if self.mode != "mapping":
             log.info("cycle %d -> %d measured; not stored in localisation mode",
                      transition.from_id, transition.to_id)
             return
@@ -394,7 +487,7 @@ class Daemon:
             "belief": self._belief_summary(belief, now),
             "map": {"path": self.config.map.path, "places": self.mapper.place_count(),
                     "transitions": self.mapper.transition_count(),
-                    "mode": self.config.mapping.mode},
+                    "mode": self.mode},
             "job": None if self._job is None else {
                 "kind": self._job.kind, "phase": self._job.progress.phase,
                 "fraction": round(self._job.progress.fraction, 3)},
@@ -447,6 +540,7 @@ class Daemon:
         tick = min(0.1, period, watchdog_s / 2 if watchdog_s else 0.1)
         next_status = time.monotonic()
         next_watchdog = time.monotonic()
+        next_save = time.monotonic() + self.config.map.save_pose_period_s
         startup_deadline = time.monotonic() + 30.0
         while not self._stop.is_set():
             now = time.monotonic()
@@ -460,6 +554,9 @@ class Daemon:
             if now >= next_status:
                 self.publish("status", self.status_payload())
                 next_status = now + period
+            if now >= next_save:
+                self._save_pose()
+                next_save = now + self.config.map.save_pose_period_s
             if ready and watchdog_s and now >= next_watchdog:
                 # WATCHDOG only while the loop is healthy: every component thread alive and
                 # cycling (devices in backoff are reported in status, not fatal).
@@ -477,6 +574,7 @@ class Daemon:
             job.abort()
             job.join(1.0)
         self.supervisor.stop(self.config.service.stop_timeout_s)
+        self._save_pose()  # where the next start resumes (design §11)
         self.publish_event("stopped")
         if self.recorder is not None:
             self.recorder.close()
@@ -543,6 +641,25 @@ def _belief_body(belief: Belief) -> dict[str, Any]:
             "recent_place": None if belief.recent_place is None else {
                 "id": belief.recent_place, "lrp": None if belief.recent_place_lrp is None
                 else round(belief.recent_place_lrp, 4)}}
+
+
+def _place_body(place: Place, out: list[Transition]) -> dict[str, Any]:
+    """``map/place/<id>``: what the map holds of a place, without the images."""
+    def finite(v: float) -> float | None:
+        return round(float(v), 6) if math.isfinite(v) else None
+
+    return {"id": place.id, "label": place.label, "created_unix_s": place.created_unix_s,
+            "background_lrp": place.background_lrp,
+            "background_estimate": place.background_estimate,
+            "landmarks": [{"row": lm.row, "col": lm.col, "bearing": round(lm.bearing, 6),
+                           "depth_m": finite(lm.depth),
+                           "depth_sigma_m": finite(math.sqrt(lm.covariance[0, 0]))
+                           if lm.covariance[0, 0] >= 0 else None,
+                           "score": round(lm.score, 5)} for lm in place.landmarks.landmarks],
+            "transitions": [{"to": t.to_id, "x": round(t.T_from_to.mean.x, 5),
+                             "y": round(t.T_from_to.mean.y, 5),
+                             "yaw": round(t.T_from_to.mean.yaw, 6), "source": t.source}
+                            for t in out]}
 
 
 def _zenoh_version() -> str:

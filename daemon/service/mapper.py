@@ -159,6 +159,18 @@ class Mapper:
         with self._lock:
             return self.graph.transitions
 
+    def place(self, place_id: int, *, panorama: bool = False) -> Place:
+        """A place of the map (KeyError if none); its reference panorama read from the map
+        file if asked (the graph in memory holds none)."""
+        with self._lock:
+            if not panorama:
+                return self.graph.place(place_id)
+            return self.store.place(place_id, panorama=True)
+
+    def neighbours(self, place_id: int) -> list[Transition]:
+        with self._lock:
+            return self.graph.neighbours(place_id)
+
     @property
     def lock(self) -> threading.RLock:
         """Held while the map is read as a whole (the graph changes under other threads)."""

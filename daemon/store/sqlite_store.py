@@ -35,7 +35,7 @@ from kernel.se2 import SE2, UncertainSE2
 
 log = logging.getLogger(__name__)
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 APPLICATION = "placecell-map"
 
 _SCHEMA = """
@@ -67,10 +67,30 @@ CREATE TABLE transitions (
 );
 CREATE INDEX transitions_to ON transitions(to_id);
 """
+_RESUME_TABLE = """
+CREATE TABLE resume (                                     -- v4: where the robot was last
+    id           INTEGER PRIMARY KEY CHECK (id = 1),      -- one row
+    place_id     INTEGER NOT NULL REFERENCES places(id),
+    x REAL NOT NULL, y REAL NOT NULL, yaw REAL NOT NULL,  -- in the place's frame
+    covariance   BLOB NOT NULL,                           -- 3x3 float64, little endian
+    saved_unix_s REAL NOT NULL
+)
+"""
+_SCHEMA += ";" + _RESUME_TABLE
 
 
 _PLACE_COLUMNS = ("id, label, created_unix_s, background_lrp, landmarks, local_space, "
                   "digest, background_estimate, signature")
+
+
+@dataclass(frozen=True)
+class SavedPose:
+    """The robot's last reliable pose, saved for a restart (design §11)."""
+
+    place_id: int
+    pose: tuple[float, float, float]  # x, y (m), yaw (rad) in the place's frame
+    covariance: np.ndarray  # 3x3
+    saved_unix_s: float
 
 
 @dataclass(frozen=True)
@@ -269,6 +289,31 @@ class MapStore:
                              "WHERE id = ?", (float(background_estimate),
                                               codec.encode_vector(signature), place_id))
 
+    def save_pose(self, saved: SavedPose) -> None:
+        """Replace the saved pose (one row; a crash keeps the previous one)."""
+        self._writable()
+        cov = np.asarray(saved.covariance, dtype="<f8").reshape(3, 3)
+        if not (np.all(np.isfinite(cov)) and all(np.isfinite(saved.pose))):
+            raise MapStoreError(f"a saved pose is finite, got {saved.pose}")
+        with self._lock, _transaction(self._db):
+            self._db.execute(
+                "INSERT OR REPLACE INTO resume(id, place_id, x, y, yaw, covariance, "
+                "saved_unix_s) VALUES (1, ?, ?, ?, ?, ?, ?)",
+                (saved.place_id, *map(float, saved.pose), cov.tobytes(),
+                 float(saved.saved_unix_s)))
+
+    def saved_pose(self) -> SavedPose | None:
+        """The pose saved last, or None (none saved, or its place is gone)."""
+        row = self._one("SELECT r.place_id, r.x, r.y, r.yaw, r.covariance, r.saved_unix_s "
+                        "FROM resume r JOIN places p ON p.id = r.place_id WHERE r.id = 1")
+        if row is None:
+            return None
+        cov = np.frombuffer(bytes(row[4]), dtype="<f8")
+        if cov.size != 9:
+            raise MapStoreError(f"{self.path}: the saved pose's covariance is damaged")
+        return SavedPose(int(row[0]), (float(row[1]), float(row[2]), float(row[3])),
+                         cov.reshape(3, 3).copy(), float(row[5]))
+
     def _insert_place(self, place: Place, keep_id: bool) -> int:
         if place.reference_panorama is None:
             raise MapStoreError("a place is stored with its reference panorama")
@@ -398,11 +443,14 @@ def _create_tables(db: sqlite3.Connection) -> None:
 def _migrate(db: sqlite3.Connection, p: Path, version: int) -> None:
     """To the current version, in one transaction: 1 (meta, empty places and transitions
     tables) is rebuilt; 2 gains places.background_estimate and places.signature (NULL:
-    the daemon's mapper makes them from the stored reference panoramas)."""
+    the daemon's mapper makes them from the stored reference panoramas); 2 and 3 gain
+    the resume table (no pose saved)."""
     with _transaction(db):
         if version == 2:
             db.execute("ALTER TABLE places ADD COLUMN background_estimate REAL")
             db.execute("ALTER TABLE places ADD COLUMN signature BLOB")
+        if version in (2, 3):
+            db.execute(_RESUME_TABLE)
             db.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'",
                        (str(SCHEMA_VERSION),))
         if version == 1:

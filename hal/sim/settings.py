@@ -13,7 +13,9 @@ class SimSettings:
         "generate:office:1",
         doc="world TOML path, or generate:<kind>:<seed> for a generated world",
     )
-    scenario: str = setting("", doc="scenario TOML path; empty: the robot stands still")
+    scenario: str = setting("config/scenarios/demo-tour.toml",
+                            doc="scenario TOML path (relative to the working directory); "
+                            "empty: the robot stands still")
     seed: int = setting(1, ge=0, doc="seed of the simulator's noise and drift")
     realtime: bool = setting(
         True, doc="run on the wall clock (daemon) or in lock-step with frame reads (evaluation)"

@@ -1,0 +1,37 @@
+"""Fixtures shared by the end-to-end tests."""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from kernel.se2 import SE2
+from tools.eval.lockstep import Run, lockstep_config
+
+OfficeMap = Callable[[Path], dict[str, SE2]]
+
+
+@pytest.fixture(scope="session")
+def office_map(tmp_path_factory: pytest.TempPathFactory) -> OfficeMap:
+    """Three places "a", "b", "c" 1.5 m apart along the office corridor from (3, 10),
+    learned once per session by the daemon's own Turn Back and Look loop on the lock-step
+    simulator. Call it with a path: a fresh copy of the map file is put there, and the
+    places' true reference poses (for the evaluator's side only) are returned."""
+    master = tmp_path_factory.mktemp("office-map") / "map.db"
+    with Run(lockstep_config(1, start_pose=(3.0, 10.0, 0.0)), map_path=master) as run:
+        labels = {}
+        for i, label in enumerate("abc"):
+            if i:
+                for _ in run.drive(1.5, 0.0, 0.0, 0.3):
+                    pass
+            labels[label] = run.learn(label).id
+        refs = {label: run.references[pid] for label, pid in labels.items()}
+
+    def copy(path: Path) -> dict[str, SE2]:
+        shutil.copyfile(master, path)
+        return dict(refs)
+
+    return copy

@@ -1,0 +1,209 @@
+"""The service under bad requests and under load (design §11): the daemon in a subprocess
+tracking on a learned map with the camera at 30 Hz, clients in other processes, loopback
+only, bounded in count and time."""
+
+from __future__ import annotations
+
+import json
+import random
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+import zenoh
+
+from tests.api_schema import check
+from tests.conftest import OfficeMap
+from tests.daemon_harness import REPO, client_session, running_daemon, wait_for, write_config
+
+ROBOT = "load"
+CAMERA_HZ = 30.0
+REQUESTS_HZ = 100.0  # the bad requests' pace (a flood of them is bounded by the GIL)
+QUERYABLES = ["status", "cmd/learn_place", "cmd/abort", "cmd/set_pose", "cmd/relocalise",
+              "cmd/mode", "map/places", "map/transitions", "map/place/1",
+              "map/place/2/panorama"]
+
+
+@dataclass
+class Daemon:
+    proc: subprocess.Popen[str]
+    port: int
+
+    def rss_kib(self) -> int:
+        for line in Path(f"/proc/{self.proc.pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1])
+        raise AssertionError("no VmRSS")
+
+    def status(self, session: zenoh.Session) -> dict[str, Any]:
+        replies = [json.loads(r.ok.payload.to_bytes()) for r in session.get(
+            f"placecell/{ROBOT}/status", timeout=5.0) if r.ok is not None]
+        assert replies, "no status"
+        return check(replies[0])
+
+
+@pytest.fixture(scope="module")
+def daemon(tmp_path_factory: pytest.TempPathFactory, office_map: OfficeMap
+           ) -> Iterator[Daemon]:
+    """Standing near place "b" of a learned map, tracking, in localisation mode."""
+    tmp = tmp_path_factory.mktemp("load")
+    office_map(tmp / "map.db")
+    scenario = tmp / "stand.toml"
+    scenario.write_text('name = "stand"\nworld = "generate:office:1"\n'
+                        "start_pose = [4.6, 10.05, 0.2]\n")
+    config, port = write_config(tmp, {"robot": {"name": ROBOT}, "mapping": {
+        "mode": "localisation"}, "camera": {"sim": {"rate_hz": CAMERA_HZ}},
+        "sim": {"scenario": str(scenario)}})
+    with running_daemon(config) as proc:
+        d = Daemon(proc, port)
+        session = client_session(port)
+        try:
+            def tracking() -> bool:
+                try:
+                    return d.status(session)["belief"]["state"] == "tracking"
+                except AssertionError:
+                    return False
+
+            assert wait_for(tracking, 90, 0.5), "the daemon never tracked"
+            time.sleep(3.0)  # warmed up: caches, JIT, zenoh buffers
+        finally:
+            session.close()
+        yield d
+
+
+def _bad_requests(rng: random.Random) -> Iterator[tuple[str, bytes]]:
+    """(key, payload) pairs, none of them a valid request: random bytes, other encodings,
+    truncated and non-object JSON, unknown keys, wrong types and ranges, huge and deeply
+    nested payloads, and keys under map/place/ that name no place."""
+    wrong_fields = {
+        "cmd/learn_place": [{"label": 5}, {"extent_m": "far"}, {"extent_m": 50},
+                            {"label": "x" * 300}, {"extent_m": None, "label": []}],
+        "cmd/set_pose": [{"place": "one"}, {"place": 1, "x": 1e9}, {"x": 0.0},
+                         {"place": 1, "sigma_xy": -1}, {"place": 1.5}],
+        "cmd/mode": [{"mode": "fly"}, {"mode": 3}, {"mode": ["mapping"]}],
+    }
+    kinds = ["bytes", "utf16", "truncated", "not_object", "unknown_key", "wrong_field",
+             "huge", "nested", "bad_key"]
+    while True:
+        kind = rng.choice(kinds)
+        key = rng.choice(QUERYABLES)
+        if kind == "bytes":
+            payload = b"\xff" + bytes(rng.randrange(256) for _ in range(rng.randrange(1, 200)))
+        elif kind == "utf16":
+            payload = json.dumps({"label": "dock"}).encode("utf-16")
+        elif kind == "truncated":
+            payload = b'{"label": "ab'[: rng.randrange(1, 12)]
+        elif kind == "not_object":
+            payload = rng.choice([b"[1, 2]", b'"learn"', b"42", b"null", b"true", b"1e999"])
+        elif kind == "unknown_key":
+            payload = json.dumps({f"zz{rng.randrange(1000)}": rng.random()}).encode()
+        elif kind == "wrong_field":
+            key = rng.choice(sorted(wrong_fields))
+            payload = json.dumps(rng.choice(wrong_fields[key])).encode()
+        elif kind == "huge":
+            payload = b'{"label": "' + b"a" * rng.choice([70_000, 1_000_000]) + b'"}'
+        elif kind == "nested":
+            payload = b"[" * 50_000
+        else:
+            key = rng.choice(["map/place/abc", "map/place/1/thumbnail", "map/place/99",
+                              "map/place/0/panorama", "map/place/1/panorama/big"])
+            payload = rng.choice([b"", b"{}"])
+        yield key, payload
+
+
+def test_a_thousand_bad_requests_each_get_an_error_while_the_pose_flows(daemon: Daemon
+                                                                        ) -> None:
+    session = client_session(daemon.port)
+    poses: list[float] = []
+    session.declare_subscriber(f"placecell/{ROBOT}/pose",
+                               lambda s: poses.append(time.monotonic()))
+    try:
+        time.sleep(1.0)
+        b0 = time.monotonic()
+        time.sleep(4.0)  # the baseline: the pose rate with nobody asking anything
+        requests = _bad_requests(random.Random(7))
+        codes: dict[str, int] = {}
+        t0 = time.monotonic()
+        for i in range(1100):  # at most REQUESTS_HZ a second, as a misbehaving client
+            while time.monotonic() < t0 + i / REQUESTS_HZ:
+                time.sleep(0.001)
+            if i == 100:  # every kind seen once: the allocator's high-water mark for a
+                rss_before = daemon.rss_kib()  # 1 MB payload is reached; growth from here
+            key, payload = next(requests)
+            replies = list(session.get(f"placecell/{ROBOT}/{key}", payload=payload,
+                                       timeout=10.0))
+            assert len(replies) == 1 and replies[0].ok is not None, (key, payload[:80])
+            reply = check(json.loads(replies[0].ok.payload.to_bytes()))
+            assert reply["kind"] == "error" and reply["message"], (key, payload[:80], reply)
+            codes[reply["code"]] = codes.get(reply["code"], 0) + 1
+        t1 = time.monotonic()
+        time.sleep(1.0)
+        rss_after = daemon.rss_kib()
+        assert daemon.proc.poll() is None
+        st = daemon.status(session)
+    finally:
+        session.close()
+    assert set(codes) <= {"bad_request", "not_found"}, codes
+    baseline = sum(b0 <= t < t0 for t in poses) / (t0 - b0)
+    rate = sum(t0 <= t <= t1 for t in poses) / (t1 - t0)
+    assert rate >= 0.9 * baseline, (rate, baseline, t1 - t0)
+    assert baseline >= 0.7 * CAMERA_HZ, baseline  # the simulator renders on the same cores
+    assert rss_after <= 1.10 * rss_before, (rss_before, rss_after)
+    assert st["healthy"] and st["belief"]["state"] == "tracking", st["belief"]
+
+
+@pytest.mark.timeout(240)
+def test_twenty_subscribers_and_ten_queries_a_second_for_a_minute(daemon: Daemon) -> None:
+    clients = [subprocess.Popen(
+        [sys.executable, "-m", "tests.load_clients", "--port", str(daemon.port), "--robot",
+         ROBOT, "--sessions", "10", "--duration", "60"], cwd=REPO, stdout=subprocess.PIPE,
+        text=True) for _ in range(2)]
+    session = client_session(daemon.port)
+    try:
+        for client in clients:
+            assert client.stdout is not None
+            assert json.loads(client.stdout.readline())["ready"]
+        time.sleep(2.0)  # every subscription declared and routed
+        rss_before = daemon.rss_kib()
+        before = daemon.status(session)
+        keys = ["status", "map/places", "map/transitions", "cmd/mode", "map/place/2"]
+        end = time.monotonic() + 54.0  # inside the clients' 60 s
+        asked = 0
+        while time.monotonic() < end:
+            tick = time.monotonic()
+            replies = list(session.get(f"placecell/{ROBOT}/{keys[asked % len(keys)]}",
+                                       timeout=5.0))
+            assert len(replies) == 1 and replies[0].ok is not None
+            assert check(json.loads(replies[0].ok.payload.to_bytes())).get("kind") != "error"
+            asked += 1
+            time.sleep(max(0.0, 0.1 - (time.monotonic() - tick)))
+        after = daemon.status(session)
+        rss_after = daemon.rss_kib()
+    finally:
+        session.close()
+    sessions = []
+    for client in clients:
+        out, _ = client.communicate(timeout=60)
+        assert client.returncode == 0
+        sessions += json.loads(out.splitlines()[-1])["sessions"]
+    assert len(sessions) == 20 and asked >= 500
+    frames = (after["components"]["camera"]["stats"]["frames"]
+              - before["components"]["camera"]["stats"]["frames"])
+    skipped = (after["components"]["processing"]["skipped_frames"]
+               - before["components"]["processing"]["skipped_frames"])
+    # The simulated camera renders on the same two cores: it delivers what it can (about
+    # 26 of the 30 Hz here); processing must keep 95 % of what it delivers.
+    assert frames >= 0.7 * CAMERA_HZ * 50 and skipped <= 0.05 * frames, (frames, skipped)
+    published = sorted({s for got in sessions for s in got["pose"]})
+    lo, hi = published[0] + 3_000_000_000, published[-1] - 3_000_000_000
+    window = [s for s in published if lo <= s <= hi]
+    for got in sessions:
+        mine = sum(lo <= s <= hi for s in got["pose"])
+        assert mine >= 0.95 * len(window), (mine, len(window))
+        assert got["belief"] >= 0.95 * len(got["pose"])
+    assert rss_after <= 1.10 * rss_before, (rss_before, rss_after)
