@@ -266,7 +266,7 @@ def test_sigkill_while_writing_never_leaves_half_a_place(tmp_path: Path) -> None
     ctx = multiprocessing.get_context("forkserver")
     ctx.set_forkserver_preload(["daemon.store.sqlite_store", "tests.map_fixtures"])
     rng = np.random.default_rng(11)
-    kills, checked = 200, 0
+    kills, checked = 100, 0
     for k in range(kills):
         writing = ctx.Event()
         proc = ctx.Process(target=write_places_until_killed, args=(str(path), GEOMETRY, k,
@@ -291,3 +291,25 @@ def test_sigkill_while_writing_never_leaves_half_a_place(tmp_path: Path) -> None
     assert checked > 20  # the writer did get to write between kills
     with MapStore.open(path, GEOMETRY, readonly=True) as store:
         assert len(store.load()) == checked
+
+
+def test_placecellctl_map_commands_answer_in_json(tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    from tools.ctl import EXIT_OK, EXIT_REFUSED, main
+
+    _two_places(tmp_path / "map.db").close()
+    assert main(["map", "info", str(tmp_path / "map.db"), "--json"]) == EXIT_OK
+    info = json.loads(capsys.readouterr().out)
+    assert info["places"] == 2 and info["schema_version"] == str(SCHEMA_VERSION)
+    assert main(["map", "export", str(tmp_path / "map.db"), str(tmp_path / "out"),
+                 "--json"]) == EXIT_OK
+    assert json.loads(capsys.readouterr().out)["exported"] == 2
+    assert main(["map", "import", str(tmp_path / "out"), str(tmp_path / "copy.db"),
+                 "--json"]) == EXIT_OK
+    assert json.loads(capsys.readouterr().out)["imported"] == 2
+    (tmp_path / "junk.db").write_bytes(b"not a map")
+    assert main(["map", "info", str(tmp_path / "junk.db"), "--json"]) == EXIT_REFUSED
+    refused = json.loads(capsys.readouterr().out)
+    assert refused["kind"] == "error" and "not a placecell map" in refused["message"]

@@ -227,14 +227,26 @@ def cmd_map(args: argparse.Namespace) -> int:
         if args.map_command == "export":
             with MapStore.open(args.file, None, readonly=True) as store:
                 n = export_map(store, args.folder)
-            print(f"exported {n} places to {args.folder}")
+            _done(args, f"exported {n} places to {args.folder}",
+                  {"exported": n, "file": str(args.file), "folder": str(args.folder)})
             return EXIT_OK
         n = import_map(args.folder, args.file)
-        print(f"imported {n} places into {args.file}")
+        _done(args, f"imported {n} places into {args.file}",
+              {"imported": n, "file": str(args.file), "folder": str(args.folder)})
         return EXIT_OK
     except MapStoreError as e:
-        print(f"placecellctl: {e}", file=sys.stderr)
+        if args.json:
+            _print({"kind": "error", "code": "refused", "message": str(e)})
+        else:
+            print(f"placecellctl: {e}", file=sys.stderr)
         return EXIT_REFUSED
+
+
+def _done(args: argparse.Namespace, text: str, as_json: dict[str, Any]) -> None:
+    if args.json:
+        _print(as_json)
+    else:
+        print(text)
 
 
 def cmd_set_pose(args: argparse.Namespace) -> int:
@@ -475,9 +487,11 @@ def main(argv: list[str] | None = None) -> int:
     m = msub.add_parser("export", help="places and transitions to a folder (JSON, PNGs)")
     m.add_argument("file")
     m.add_argument("folder")
+    m.add_argument("--json", action="store_true")
     m = msub.add_parser("import", help="a new map file from an exported folder")
     m.add_argument("folder")
     m.add_argument("file")
+    m.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_map)
     args = parser.parse_args(argv)
     try:

@@ -35,7 +35,8 @@ def learn(world: str, pose: tuple[float, float, float], seed: int,
           choose: CandidateChooser | None = None) -> LearnedPlace:
     base_config = config or load(None)
     cfg = dataclasses.replace(base_config, sim=dataclasses.replace(
-        base_config.sim, world=world, start_pose=list(pose), realtime=False, seed=seed))
+        base_config.sim, world=world, start_pose=list(pose), realtime=False, seed=seed,
+        scenario=""))
     ctx = HalContext(cfg)
     camera, base = create_camera(cfg.camera, ctx), create_base(cfg.base, ctx)
     camera.open()

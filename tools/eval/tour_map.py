@@ -131,11 +131,12 @@ def mapped_run(args: argparse.Namespace) -> Iterator[tuple[Run, list[Point]]]:
     known = load_references(args.map, key) if args.map else None
     if args.map and known is None:
         args.map.unlink(missing_ok=True)
+    tour = plan_tour(world)  # once: planning costs seconds on a large world
     with Run(cfg, map_path=args.map) as run:
         if known is None:
-            known = learn_along(run, tour_points(world, args.spacing), args.places, args.speed)
+            known = learn_along(run, along(tour, args.spacing), args.places, args.speed)
             if args.map:
                 save_references(args.map, known, key)
         run.references = known
         run.restart_localiser()
-        yield run, tour_points(world, 0.1)
+        yield run, along(tour, 0.1)
