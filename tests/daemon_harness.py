@@ -123,6 +123,17 @@ def listening_session(port: int) -> zenoh.Session:
     return zenoh.open(conf)
 
 
+def read_json_lines(path: Path) -> list[dict[str, Any]]:
+    """The JSON objects of a file a follower writes (the line being written skipped)."""
+    out = []
+    for line in path.read_text().splitlines():
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue  # being written, or a client's own message
+    return out
+
+
 def wait_for(predicate: Any, timeout_s: float, interval_s: float = 0.05) -> bool:
     end = time.monotonic() + timeout_s
     while time.monotonic() < end:

@@ -27,6 +27,7 @@ from tests.daemon_harness import (
     client_session,
     free_port,
     listening_session,
+    read_json_lines,
     running_daemon,
     venv_bin,
     wait_for,
@@ -301,6 +302,14 @@ def _track_dock_to_door(tmp: Path, references: dict[int, SE2], dock: int, door: 
         true_in_place = references[p["place"]["id"]].between(truth.at(p["stamp_ns"]))
         errors.append(math.hypot(p["x"] - true_in_place.x, p["y"] - true_in_place.y))
     assert max(errors) <= 0.10, (max(errors), sum(errors) / len(errors))
+    # The `map` frame (design §6: the first place's, the graph optimised): the dock's poses
+    # as they are, the door's through the transition; against the truth all along.
+    tracked = [p for p in poses if p["stamp_ns"] >= t0 and p["state"] == "tracking"]
+    assert all(p["map"] is not None for p in tracked)
+    assert all(abs(p["map"]["x"] - p["x"]) < 1e-4 for p in tracked if p["place"]["id"] == dock)
+    in_map = [math.dist((p["map"]["x"], p["map"]["y"]), references[dock].between(
+        truth.at(p["stamp_ns"])).as_tuple()[:2]) for p in tracked]
+    assert max(in_map) <= 0.12, (max(in_map), sum(in_map) / len(in_map))
     stopped = poses[-1]
     assert stopped["state"] == "tracking" and stopped["place"]["id"] == door
     _resume_after_restart(tmp, truth.samples()[-1][1:], stopped)
@@ -330,8 +339,11 @@ def _resume_after_restart(tmp: Path, true_pose: tuple[float, ...], stopped: dict
         with running_daemon(config):
             assert wait_for(lambda: any(p["state"] == "tracking" for p in poses)
                             and len(poses) >= 30, 120, 0.2), poses[-3:]
+            listed = [json.loads(r.ok.payload.to_bytes()) for r in session.get(
+                "placecell/e2e/map/places", timeout=5.0) if r.ok is not None]
     finally:
         session.close()
+    assert [p["label"] for p in check(listed[0])["places"]] == ["dock", "door"]  # intact
     first = next(i for i, p in enumerate(poses) if p["state"] == "tracking")
     assert poses[0]["state"] == "relocalising", poses[0]
     assert "saved at the last stop" in poses[0]["reason"], poses[0]
@@ -451,7 +463,7 @@ def test_make_run_learns_places_on_its_own_and_tracks_within_two_minutes(
                 else []
 
         def tracking() -> bool:
-            return any(p.get("state") == "tracking" for p in _read_lines(pose_file))
+            return any(p.get("state") == "tracking" for p in read_json_lines(pose_file))
 
         try:
             assert wait_for(lambda: len(places()) >= 1 and tracking(),
@@ -467,15 +479,5 @@ def test_make_run_learns_places_on_its_own_and_tracks_within_two_minutes(
         assert 0.3 < first["background_lrp"] < 0.9, first
         pairs = {(t["from"], t["to"]) for t in _transitions(port)}
         assert (1, 2) in pairs and (2, 1) in pairs
-    tracked = [p for p in _read_lines(pose_file) if p.get("state") == "tracking"]
+    tracked = [p for p in read_json_lines(pose_file) if p.get("state") == "tracking"]
     assert {p["place"]["id"] for p in tracked} >= {1, 2}
-
-
-def _read_lines(path: Path) -> list[dict[str, Any]]:
-    out = []
-    for line in path.read_text().splitlines():
-        try:
-            out.append(json.loads(line))
-        except json.JSONDecodeError:
-            continue  # the line being written
-    return out

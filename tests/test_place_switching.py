@@ -38,10 +38,11 @@ def test_a_place_recognised_everywhere_does_not_pull_the_estimate_back() -> None
 
 def test_hand_over_to_the_nearer_neighbour_recognised_nearly_as_well() -> None:
     sw = PlaceSwitcher(S)
-    assert sw.decide(1, [2], scores(p1=0.10, p2=0.02), {1: 1.6, 2: 1.3}).place_id == 2
-    # Not if it is not recognised nearly as well, or not nearer by handover_m.
-    assert sw.decide(1, [2], scores(p1=0.10, p2=-0.05), {1: 1.6, 2: 1.3}) is None
-    assert sw.decide(1, [2], scores(p1=0.10, p2=0.05), {1: 1.6, 2: 1.5}) is None
+    assert sw.decide(1, [2], scores(p1=0.10, p2=0.02), {1: 2.0, 2: 0.9}).place_id == 2
+    # Not if it is not recognised nearly as well, or not nearer by handover_m and at most
+    # handover_ratio (half) of the current place's distance.
+    assert sw.decide(1, [2], scores(p1=0.10, p2=-0.05), {1: 2.0, 2: 0.9}) is None
+    assert sw.decide(1, [2], scores(p1=0.10, p2=0.05), {1: 1.6, 2: 1.3}) is None
 
 
 def test_a_place_without_transition_needs_a_streak_and_a_clear_lead() -> None:
@@ -120,8 +121,9 @@ def test_a_place_the_graph_puts_near_is_checked_every_time_and_handed_over_to() 
     known = list(range(1, 11))
     for _ in range(5):  # in every check, whatever the rotation through the others
         assert 7 in sw.to_check(1, [2], known, near=[7])
-    # Nearer by the graph (0.4 m against 0.9 m) and recognised nearly as well: through
-    # the graph's path, since there is no transition 1 -> 7.
+    # Nearer by the graph (0.4 m against 0.9 m: handover_m, no ratio for a place met
+    # again) and recognised nearly as well: through the graph's path, since there is no
+    # transition 1 -> 7.
     switch = sw.decide(1, [2], scores(p1=0.10, p2=0.0, p7=0.05), {1: 0.9, 2: 1.4, 7: 0.4},
                        near=[7])
     assert switch is not None and (switch.kind, switch.place_id) == ("graph", 7)

@@ -10,12 +10,19 @@ import json
 import math
 import subprocess
 from pathlib import Path
-from typing import Any
 
 from tests.conftest import OfficeMap
-from tests.daemon_harness import REPO, running_daemon, venv_bin, wait_for, write_config
+from tests.daemon_harness import (
+    REPO,
+    read_json_lines,
+    running_daemon,
+    venv_bin,
+    wait_for,
+    write_config,
+)
 from tests.test_learn_e2e import Truth
 
+_read = read_json_lines  # a follower's file, the line being written skipped
 START = (4.75, 10.15, 0.4)  # near place "b"
 KIDNAP_AT_S = 14.0
 RELEASE = (3.2, 9.85, -1.0)  # near place "a", turned
@@ -35,16 +42,6 @@ def _follow(config: Path, leaf: str, out: Path) -> subprocess.Popen[str]:
     return subprocess.Popen([venv_bin("placecellctl"), "--config", str(config), leaf,
                              "--follow", "--json", "--duration", "90"], cwd=REPO,
                             stdout=out.open("w"), stderr=subprocess.STDOUT, text=True)
-
-
-def _read(path: Path) -> list[dict[str, Any]]:
-    out = []
-    for line in path.read_text().splitlines():
-        try:
-            out.append(json.loads(line))
-        except json.JSONDecodeError:
-            continue  # being written, or a client's own message
-    return out
 
 
 def _ctl(config: Path, *args: str) -> subprocess.CompletedProcess[str]:

@@ -4,6 +4,7 @@ only, bounded in count and time."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import random
 import subprocess
@@ -23,6 +24,7 @@ from tests.daemon_harness import REPO, client_session, running_daemon, wait_for,
 
 ROBOT = "load"
 CAMERA_HZ = 30.0
+FUZZ_CAMERA_HZ = 10.0
 REQUESTS_HZ = 100.0  # the bad requests' pace (a flood of them is bounded by the GIL)
 QUERYABLES = ["status", "cmd/learn_place", "cmd/abort", "cmd/set_pose", "cmd/relocalise",
               "cmd/mode", "map/places", "map/transitions", "map/place/1",
@@ -47,17 +49,16 @@ class Daemon:
         return check(replies[0])
 
 
-@pytest.fixture(scope="module")
-def daemon(tmp_path_factory: pytest.TempPathFactory, office_map: OfficeMap
-           ) -> Iterator[Daemon]:
+@contextlib.contextmanager
+def _tracking_daemon(tmp: Path, office_map: OfficeMap, camera_hz: float
+                     ) -> Iterator[Daemon]:
     """Standing near place "b" of a learned map, tracking, in localisation mode."""
-    tmp = tmp_path_factory.mktemp("load")
     office_map(tmp / "map.db")
     scenario = tmp / "stand.toml"
     scenario.write_text('name = "stand"\nworld = "generate:office:1"\n'
                         "start_pose = [4.6, 10.05, 0.2]\n")
     config, port = write_config(tmp, {"robot": {"name": ROBOT}, "mapping": {
-        "mode": "localisation"}, "camera": {"sim": {"rate_hz": CAMERA_HZ}},
+        "mode": "localisation"}, "camera": {"sim": {"rate_hz": camera_hz}},
         "sim": {"scenario": str(scenario)}})
     with running_daemon(config) as proc:
         d = Daemon(proc, port)
@@ -73,6 +74,21 @@ def daemon(tmp_path_factory: pytest.TempPathFactory, office_map: OfficeMap
             time.sleep(3.0)  # warmed up: caches, JIT, zenoh buffers
         finally:
             session.close()
+        yield d
+
+
+@pytest.fixture
+def fuzzed(tmp_path: Path, office_map: OfficeMap) -> Iterator[Daemon]:
+    """At the default camera rate (10 Hz): the machine has room, so the pose rate shows
+    what the bad requests cost."""
+    with _tracking_daemon(tmp_path, office_map, FUZZ_CAMERA_HZ) as d:
+        yield d
+
+
+@pytest.fixture
+def loaded(tmp_path: Path, office_map: OfficeMap) -> Iterator[Daemon]:
+    """At 30 Hz: the simulated camera renders on the same two cores as everything else."""
+    with _tracking_daemon(tmp_path, office_map, CAMERA_HZ) as d:
         yield d
 
 
@@ -116,8 +132,9 @@ def _bad_requests(rng: random.Random) -> Iterator[tuple[str, bytes]]:
         yield key, payload
 
 
-def test_a_thousand_bad_requests_each_get_an_error_while_the_pose_flows(daemon: Daemon
+def test_a_thousand_bad_requests_each_get_an_error_while_the_pose_flows(fuzzed: Daemon
                                                                         ) -> None:
+    daemon = fuzzed
     session = client_session(daemon.port)
     poses: list[float] = []
     session.declare_subscriber(f"placecell/{ROBOT}/pose",
@@ -128,6 +145,7 @@ def test_a_thousand_bad_requests_each_get_an_error_while_the_pose_flows(daemon: 
         time.sleep(4.0)  # the baseline: the pose rate with nobody asking anything
         requests = _bad_requests(random.Random(7))
         codes: dict[str, int] = {}
+        frames_before = daemon.status(session)["components"]["camera"]["stats"]["frames"]
         t0 = time.monotonic()
         for i in range(1100):  # at most REQUESTS_HZ a second, as a misbehaving client
             while time.monotonic() < t0 + i / REQUESTS_HZ:
@@ -142,6 +160,8 @@ def test_a_thousand_bad_requests_each_get_an_error_while_the_pose_flows(daemon: 
             assert reply["kind"] == "error" and reply["message"], (key, payload[:80], reply)
             codes[reply["code"]] = codes.get(reply["code"], 0) + 1
         t1 = time.monotonic()
+        frames = daemon.status(session)["components"]["camera"]["stats"]["frames"] \
+            - frames_before
         time.sleep(1.0)
         rss_after = daemon.rss_kib()
         assert daemon.proc.poll() is None
@@ -151,14 +171,19 @@ def test_a_thousand_bad_requests_each_get_an_error_while_the_pose_flows(daemon: 
     assert set(codes) <= {"bad_request", "not_found"}, codes
     baseline = sum(b0 <= t < t0 for t in poses) / (t0 - b0)
     rate = sum(t0 <= t <= t1 for t in poses) / (t1 - t0)
-    assert rate >= 0.9 * baseline, (rate, baseline, t1 - t0)
-    assert baseline >= 0.7 * CAMERA_HZ, baseline  # the simulator renders on the same cores
+    camera_hz = frames / (t1 - t0)  # what the camera delivered meanwhile
+    print(f"fuzz: {sum(codes.values())} requests in {t1 - t0:.1f} s {codes}; pose "
+          f"{rate:.1f} Hz (baseline {baseline:.1f}, camera {camera_hz:.1f}); RSS "
+          f"{rss_before} -> {rss_after} KiB")
+    assert rate >= 0.9 * FUZZ_CAMERA_HZ and rate >= 0.9 * camera_hz, (rate, camera_hz,
+                                                                       baseline)
     assert rss_after <= 1.10 * rss_before, (rss_before, rss_after)
     assert st["healthy"] and st["belief"]["state"] == "tracking", st["belief"]
 
 
 @pytest.mark.timeout(240)
-def test_twenty_subscribers_and_ten_queries_a_second_for_a_minute(daemon: Daemon) -> None:
+def test_twenty_subscribers_and_ten_queries_a_second_for_a_minute(loaded: Daemon) -> None:
+    daemon = loaded
     clients = [subprocess.Popen(
         [sys.executable, "-m", "tests.load_clients", "--port", str(daemon.port), "--robot",
          ROBOT, "--sessions", "10", "--duration", "60"], cwd=REPO, stdout=subprocess.PIPE,
@@ -202,6 +227,10 @@ def test_twenty_subscribers_and_ten_queries_a_second_for_a_minute(daemon: Daemon
     published = sorted({s for got in sessions for s in got["pose"]})
     lo, hi = published[0] + 3_000_000_000, published[-1] - 3_000_000_000
     window = [s for s in published if lo <= s <= hi]
+    worst = min(sum(lo <= s <= hi for s in got["pose"]) for got in sessions) / len(window)
+    print(f"load: {asked} queries; camera {frames} frames in ~54 s, {skipped} skipped; "
+          f"worst subscriber {worst:.3f} of {len(window)} poses; RSS {rss_before} -> "
+          f"{rss_after} KiB")
     for got in sessions:
         mine = sum(lo <= s <= hi for s in got["pose"])
         assert mine >= 0.95 * len(window), (mine, len(window))

@@ -77,6 +77,7 @@ class PlaceSwitcher:
         # well (a place's LRP may stay at its background until the robot is almost there).
         nearer = [p for p in [*neighbours, *(near or [])] if p in lead and p in dist
                   and dist[p] + s.handover_m <= d_here
+                  and (dist[p] <= s.handover_ratio * d_here or p not in neighbours)
                   and lead[p] >= here - s.handover_tolerance]
         best_nb = max(rising or nearer, key=lambda p: lead[p], default=None)
         if best_nb is not None:

@@ -74,7 +74,10 @@ class LocalisationSettings:
                                    "this (§8.2)")
     handover_m: float = setting(0.25, ge=0.0, le=10.0, doc="a neighbour whose reference "
                                 "the estimate is this much nearer than the current "
-                                "place's takes over...")
+                                "place's...")
+    handover_ratio: float = setting(0.5, gt=0.0, le=1.0, doc="...and at most this "
+                                    "fraction of the current place's distance takes "
+                                    "over...")
     handover_tolerance: float = setting(0.1, ge=0.0, le=1.0, doc="...if its LRP minus "
                                         "background is at most this below the current "
                                         "place's")

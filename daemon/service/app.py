@@ -46,6 +46,7 @@ from daemon.vision.unwarp import Unwarper
 from hal.registry import HalContext, create_base, create_camera
 from kernel.errors import PlacecellError
 from kernel.panorama import geometry_checksum
+from kernel.se2 import SE2
 
 log = logging.getLogger(__name__)
 
@@ -434,7 +435,12 @@ class Daemon:
             self._tracked = SavedPose(belief.place_id, belief.pose_in_place,
                                       np.array(belief.covariance).reshape(3, 3), time.time())
         body = _belief_body(belief)
-        self.publish("pose", zenoh_link.encode("placecell.pose", _pose_body(belief)))
+        in_map = None
+        if belief.place_id is not None and belief.pose_in_place is not None:
+            place = self.mapper.map_frame.get(belief.place_id)
+            if place is not None:
+                in_map = place.compose(SE2.of(belief.pose_in_place))
+        self.publish("pose", zenoh_link.encode("placecell.pose", _pose_body(belief, in_map)))
         self.publish("belief", zenoh_link.encode("placecell.belief", body))
         if belief.closed_transition is not None:
             self._store_cycle(belief.closed_transition)
@@ -616,8 +622,9 @@ def _try_reply(query: zenoh.Query, payload: bytes) -> None:
         log.debug("reply failed: %s", e)
 
 
-def _pose_body(belief: Belief) -> dict[str, Any]:
-    """``pose`` (design §11): the estimate in the current place's frame."""
+def _pose_body(belief: Belief, in_map: SE2 | None) -> dict[str, Any]:
+    """``pose`` (design §11): the estimate in the current place's frame, and composed
+    into the `map` frame (design §6) when the place is embedded in it."""
     pose = belief.pose_in_place
     return {"stamp_ns": belief.stamp_ns, "state": belief.state, "reason": belief.reason,
             "place": None if belief.place_id is None else {
@@ -627,7 +634,9 @@ def _pose_body(belief: Belief) -> dict[str, Any]:
             "yaw": None if pose is None else round(pose[2], 6),
             "covariance": None if belief.covariance is None else [
                 float(f"{v:.6g}") for v in belief.covariance],
-            "confidence": round(belief.confidence, 4)}
+            "confidence": round(belief.confidence, 4),
+            "map": None if in_map is None else {
+                "x": round(in_map.x, 5), "y": round(in_map.y, 5), "yaw": round(in_map.yaw, 6)}}
 
 
 def _belief_body(belief: Belief) -> dict[str, Any]:

@@ -13,13 +13,14 @@ import dataclasses
 import logging
 import threading
 
+from daemon.mapping.embedding import embed
 from daemon.mapping.graph import TopologicalMap
 from daemon.mapping.odometry_chain import OdometryChain
 from daemon.mapping.place import Place, with_cues
 from daemon.mapping.settings import OdometryNoiseSettings
 from daemon.mapping.transition import Transition, TransitionSource
 from daemon.store.sqlite_store import MapStore, PlaceSummary
-from kernel.se2 import UncertainSE2
+from kernel.se2 import SE2, UncertainSE2
 from kernel.types import Odometry
 
 log = logging.getLogger(__name__)
@@ -46,6 +47,7 @@ class Mapper:
         self._lock = threading.RLock()
         self.graph: TopologicalMap = store.load()
         self._fill_cues()
+        self.map_frame: dict[int, SE2] = embed(self.graph)  # design §6: the `map` frame
         self._last_place: int | None = None  # learned in this run of odometry
         self._chain: OdometryChain | None = None  # from that place's reference pose
         self._pending: OdometryChain | None = None  # from the reference of a place in work
@@ -127,13 +129,24 @@ class Mapper:
                 self.graph.add_transition(t)
                 added = list(t.both_ways())
             self._last_place, self._chain, self._pending = stored.id, self._pending, None
+            self.map_frame = embed(self.graph)
             return stored, added
 
     def add_transition(self, transition: Transition) -> None:
-        """A transition measured while localising (a closed cycle, §7.1.3), both ways."""
+        """A transition measured while localising (a closed cycle, §7.1.3), both ways; the
+        `map` frame is optimised again over it."""
         with self._lock:
             self.store.add_transition(transition)
             self.graph.add_transition(transition)
+        # Off the caller's thread (the processing loop closes cycles): seconds on a large map.
+        threading.Thread(target=self._embed, name="placecell-embed", daemon=True).start()
+
+    def _embed(self) -> None:
+        with self._lock:
+            graph = TopologicalMap(self.graph.places, self.graph.transitions)
+        frame = embed(graph)
+        with self._lock:
+            self.map_frame = frame
 
     def set_background(self, place_id: int, background_lrp: float) -> None:
         """The place's background LRP, measured as the robot left it (design §6)."""
