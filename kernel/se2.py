@@ -71,6 +71,10 @@ class SE2:
                          [0.0, 0.0, -1.0]])
 
 
+# The χ² value with 3 degrees of freedom that 99.9 % of consistent differences stay below.
+CHI2_3_DOF_999 = 16.27
+
+
 def _zeros() -> np.ndarray:
     return np.zeros((3, 3))
 
@@ -108,6 +112,12 @@ class UncertainSE2:
         info_a, info_b = np.linalg.inv(self.covariance), np.linalg.inv(other.covariance)
         cov = np.linalg.inv(info_a + info_b)
         return UncertainSE2(SE2.of(cov @ (info_a @ a + info_b @ b)), cov)
+
+    def agrees_with(self, other: UncertainSE2, chi2: float = CHI2_3_DOF_999) -> bool:
+        """Whether two independent estimates of one pose can be the same pose: their
+        difference within the ``chi2`` gate of Σ₁ + Σ₂ (default: 99.9 %, 3 dof)."""
+        both = UncertainSE2(self.mean, self.covariance + other.covariance)
+        return both.mahalanobis2(other.mean) <= chi2
 
     def mahalanobis2(self, truth: SE2) -> float:
         """Squared Mahalanobis distance of ``truth`` from this estimate (yaw wrapped)."""

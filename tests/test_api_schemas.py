@@ -14,8 +14,8 @@ from daemon.service import api
 from tests.api_schema import VALIDATORS, check, check_request
 
 REQUESTS: dict[str, type[Any]] = {
-    "learn_place": api.LearnRequest, "abort": api.AbortRequest,
-    "relocalise": api.RelocaliseRequest, "set_pose": api.SetPoseRequest,
+    "learn_place": api.LearnRequest, "abort": api.NoParameters,
+    "relocalise": api.NoParameters, "set_pose": api.SetPoseRequest,
     "mode": api.ModeRequest, "no_parameters": api.NoParameters}
 
 

@@ -9,6 +9,7 @@ import os
 import sqlite3
 import threading
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -313,3 +314,36 @@ def test_placecellctl_map_commands_answer_in_json(tmp_path: Path,
     assert main(["map", "info", str(tmp_path / "junk.db"), "--json"]) == EXIT_REFUSED
     refused = json.loads(capsys.readouterr().out)
     assert refused["kind"] == "error" and "not a placecell map" in refused["message"]
+
+
+
+def test_the_map_frame_is_optimised_off_the_callers_thread_latest_result_kept(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """design §6: Mapper embeds the places in the `map` frame on a thread of its own
+    (a large map takes seconds), and an optimisation that ends late never replaces a
+    later one's result."""
+    import daemon.service.mapper as mapper_module
+
+    release = threading.Event()
+    real_embed = mapper_module.embed
+    calls: list[int] = []
+
+    def first_one_slow(graph: Any) -> Any:
+        calls.append(len(graph.places))
+        if len(calls) == 1:
+            assert release.wait(10)  # the start-up optimisation ends last
+        return real_embed(graph)
+
+    monkeypatch.setattr(mapper_module, "embed", first_one_slow)
+    with _two_places(tmp_path / "map.db") as store:
+        mapper = Mapper(store, OdometryNoiseSettings())  # returns while it optimises
+        assert mapper.map_frame == {}
+        mapper.reembed().join(10)
+        held = mapper.map_frame
+        assert set(held) == {1, 2}
+        release.set()
+        for thread in threading.enumerate():
+            if thread.name == "placecell-embed":
+                thread.join(10)
+        assert calls == [2, 2]
+        assert mapper.map_frame is held  # the late start-up result was dropped

@@ -88,6 +88,13 @@ def test_the_daemon_localises_by_itself_and_recovers_from_a_kidnap(
             assert wait_for(lambda: relocalised(3), 30, 0.5), _read(events_file)
             third = [e for e in _read(events_file) if e.get("event") == "relocalised"][2]
             assert names[third["place"]] == "a" and third["how"] == "global", third
+            # An operator who starts following now still sees how it got here: the
+            # daemon keeps its last events for late subscribers.
+            late = _ctl(config, "events", "--follow", "--json", "--duration", "3")
+            seen = [json.loads(line) for line in late.stdout.splitlines()]
+            assert [e["stamp_ns"] for e in seen if e["event"] == "relocalised"][:3] == [
+                e["stamp_ns"] for e in _read(events_file)
+                if e.get("event") == "relocalised"][:3], seen
         finally:
             for f in followers:
                 f.terminate()

@@ -359,7 +359,8 @@ def _follow(args: argparse.Namespace, leaf: str, fmt: Callable[[dict[str, Any]],
         with contextlib.suppress(ValueError):  # not ours: ignored
             messages.put(zenoh_link.decode(sample.payload.to_bytes()))
 
-    subscriber = session.declare_subscriber(key, on_sample)
+    subscriber = zenoh_link.declare_history_subscriber(session, key, on_sample) \
+        if leaf == "events" else session.declare_subscriber(key, on_sample)
     shown = 0
     try:
         deadline = time.monotonic() + (args.duration if args.follow else args.timeout)

@@ -61,7 +61,7 @@ class LocalisationSettings:
                                    "mis-associated landmark cannot veto a particle")
     min_ncc: float = setting(0.6, ge=-1.0, lt=1.0, doc="a tracked landmark weighs "
                              "(NCC - min_ncc) / (1 - min_ncc); below it, nothing (eq. 8.10)")
-    max_zoom: float = setting(1.5, ge=1.0, le=100.0, doc="landmarks appearing more than "
+    max_zoom: float = setting(1.35, ge=1.0, le=100.0, doc="landmarks appearing more than "
                               "this much larger or smaller than in the reference are not "
                               "used (a template matched at another scale slides)")
     search_cols: int = setting(12, ge=2, le=180, doc="tracking window half-width (columns) "

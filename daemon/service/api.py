@@ -50,19 +50,10 @@ class LearnRequest:
 
 
 @dataclass(frozen=True)
-class AbortRequest:
-    pass
-
-
-@dataclass(frozen=True)
 class NoParameters:
-    """The queries that take none (status, map/...): an empty payload or ``{}``;
-    anything else is refused, as every request with a key it does not know."""
-
-
-@dataclass(frozen=True)
-class RelocaliseRequest:
-    """cmd/relocalise: forget the pose and search the whole map (design §9)."""
+    """The queries that take none (cmd/abort, cmd/relocalise, status, map/...): an
+    empty payload or ``{}``; anything else is refused, as every request with a key it
+    does not know."""
 
 
 @dataclass(frozen=True)

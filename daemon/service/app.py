@@ -166,11 +166,14 @@ class Daemon:
     # ------------------------------------------------------------------ zenoh
     def _open_zenoh(self) -> None:
         z = self.config.zenoh
-        self._session = zenoh_link.open_session(z.mode, z.listen, z.connect, z.multicast_scouting)
+        self._session = zenoh_link.open_session(z.mode, z.listen, z.connect,
+                                                z.multicast_scouting, timestamping=True)
         s = self._session
         self._token = s.liveliness().declare_token(zenoh_link.key(self.robot, "alive"))
-        for leaf in ("status", "events", "belief", "pose"):
+        for leaf in ("status", "belief", "pose"):
             self._publishers[leaf] = s.declare_publisher(zenoh_link.key(self.robot, leaf))
+        self._publishers["events"] = zenoh_link.declare_event_publisher(
+            s, zenoh_link.key(self.robot, "events"))
         # Late joiners (placecellctl status) get the latest status at once by query.
         for leaf, handler in (("status", self._answer_status),
                               ("cmd/learn_place", self._answer_learn),
@@ -313,7 +316,7 @@ class Daemon:
 
     def _answer_abort(self, query: zenoh.Query) -> None:
         received_ns = time.monotonic_ns()
-        api.parse(api.AbortRequest, _payload(query), "abort")
+        api.parse(api.NoParameters, _payload(query), "abort")
         job = self._job
         if job is None:
             query.reply(query.key_expr, api.error(api.ErrorCode.NOTHING_TO_ABORT,
@@ -343,7 +346,7 @@ class Daemon:
 
     def _answer_relocalise(self, query: zenoh.Query) -> None:
         """cmd/relocalise: search the whole map for the robot (design §9)."""
-        api.parse(api.RelocaliseRequest, _payload(query), "relocalise")
+        api.parse(api.NoParameters, _payload(query), "relocalise")
         localiser = self.processing.localiser
         if localiser is None:
             why = self.supervisor.health["processing"].last_error or "starting"

@@ -47,11 +47,16 @@ class Mapper:
         self._lock = threading.RLock()
         self.graph: TopologicalMap = store.load()
         self._fill_cues()
-        self.map_frame: dict[int, SE2] = embed(self.graph)  # design §6: the `map` frame
+        # design §6: each place's pose in the `map` frame; empty until first optimised
+        # (off the caller's thread: seconds on a map of a thousand places).
+        self.map_frame: dict[int, SE2] = {}
+        self._embedding = 0  # the last optimisation asked for
+        self._embedded = 0  # the one map_frame holds
         self._last_place: int | None = None  # learned in this run of odometry
         self._chain: OdometryChain | None = None  # from that place's reference pose
         self._pending: OdometryChain | None = None  # from the reference of a place in work
         self._recent: collections.deque[Odometry] = collections.deque(maxlen=500)
+        self.reembed()
 
     def _fill_cues(self) -> None:
         """Places stored before the map held the global search's cues (schema 2) get
@@ -104,9 +109,16 @@ class Mapper:
                 return odometry
             if odometry is None:
                 return Link(seen[0], seen[1], "vision")
-            if odometry.from_id == seen[0]:
-                return Link(seen[0], odometry.T_from_new.fuse(seen[1]), "vision")
-            return odometry
+            if odometry.from_id != seen[0]:
+                return odometry
+            if not odometry.T_from_new.agrees_with(seen[1]):
+                # A confident estimate the odometry contradicts: one of them is wrong, and
+                # fusing would make a link no one measured; odometry fails gracefully.
+                log.warning("place being learned: the estimate in place %d %s disagrees "
+                            "with the odometry %s; linked by odometry alone", seen[0],
+                            seen[1].mean, odometry.T_from_new.mean)
+                return odometry
+            return Link(seen[0], odometry.T_from_new.fuse(seen[1]), "vision")
 
     def cancel_place(self) -> None:
         with self._lock:
@@ -129,8 +141,8 @@ class Mapper:
                 self.graph.add_transition(t)
                 added = list(t.both_ways())
             self._last_place, self._chain, self._pending = stored.id, self._pending, None
-            self.map_frame = embed(self.graph)
-            return stored, added
+        self.reembed()
+        return stored, added
 
     def add_transition(self, transition: Transition) -> None:
         """A transition measured while localising (a closed cycle, §7.1.3), both ways; the
@@ -138,15 +150,25 @@ class Mapper:
         with self._lock:
             self.store.add_transition(transition)
             self.graph.add_transition(transition)
-        # Off the caller's thread (the processing loop closes cycles): seconds on a large map.
-        threading.Thread(target=self._embed, name="placecell-embed", daemon=True).start()
+        self.reembed()
 
-    def _embed(self) -> None:
+    def reembed(self) -> threading.Thread:
+        """Optimise the `map` frame over the map as it is now, on a thread of its own
+        (the processing loop closes cycles; a large map takes seconds); a later
+        optimisation's result is never replaced by an earlier one's."""
         with self._lock:
-            graph = TopologicalMap(self.graph.places, self.graph.transitions)
+            self._embedding += 1
+            job = (self._embedding, TopologicalMap(self.graph.places, self.graph.transitions))
+        thread = threading.Thread(target=self._embed, args=job, name="placecell-embed",
+                                  daemon=True)
+        thread.start()
+        return thread
+
+    def _embed(self, generation: int, graph: TopologicalMap) -> None:
         frame = embed(graph)
         with self._lock:
-            self.map_frame = frame
+            if generation > self._embedded:
+                self.map_frame, self._embedded = frame, generation
 
     def set_background(self, place_id: int, background_lrp: float) -> None:
         """The place's background LRP, measured as the robot left it (design §6)."""

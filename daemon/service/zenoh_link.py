@@ -12,6 +12,7 @@ import logging
 from typing import Any
 
 import zenoh
+import zenoh.ext
 
 from kernel.errors import ConfigError
 
@@ -24,29 +25,54 @@ def key(robot: str, leaf: str) -> str:
     return f"placecell/{robot}/{leaf}"
 
 
+# The events kept for late subscribers (``placecellctl events --follow`` shows them first).
+EVENTS_KEPT = 32
+
+
 def make_config(mode: str, listen: list[str], connect: list[str],
-                multicast_scouting: bool) -> zenoh.Config:
-    """A zenoh configuration that touches only the endpoints given."""
+                multicast_scouting: bool, timestamping: bool = False) -> zenoh.Config:
+    """A zenoh configuration that touches only the endpoints given; ``timestamping``
+    for a session whose publishers keep a cache (the daemon's)."""
     conf = zenoh.Config()
     try:
         conf.insert_json5("mode", json.dumps(mode))
         conf.insert_json5("listen/endpoints", json.dumps(listen))
         conf.insert_json5("connect/endpoints", json.dumps(connect))
         conf.insert_json5("scouting/multicast/enabled", json.dumps(multicast_scouting))
+        if timestamping:
+            conf.insert_json5("timestamping/enabled", "true")
     except Exception as e:  # zenoh raises its own ZError for bad values
         raise ConfigError(f"[zenoh] invalid setting: {e}") from e
     return conf
 
 
 def open_session(mode: str, listen: list[str], connect: list[str],
-                 multicast_scouting: bool) -> zenoh.Session:
-    conf = make_config(mode, listen, connect, multicast_scouting)
+                 multicast_scouting: bool, timestamping: bool = False) -> zenoh.Session:
+    conf = make_config(mode, listen, connect, multicast_scouting, timestamping)
     try:
         return zenoh.open(conf)
     except Exception as e:
         raise ConfigError(
             f"[zenoh] cannot open a session (listen={listen}, connect={connect}): {e}"
         ) from e
+
+
+def declare_event_publisher(session: zenoh.Session, key_expr: str) -> Any:
+    """``events`` keeps its last EVENTS_KEPT samples (zenoh-ext's advanced publisher, its
+    session timestamping): an operator's ``events --follow`` started after the daemon
+    still sees how it localised."""
+    return zenoh.ext.declare_advanced_publisher(
+        session, key_expr, cache=zenoh.ext.CacheConfig(max_samples=EVENTS_KEPT),
+        publisher_detection=True)
+
+
+def declare_history_subscriber(session: zenoh.Session, key_expr: str,
+                               callback: Any) -> Any:
+    """A subscriber that first gets what the publishers of ``key_expr`` keep (the
+    events), then every new sample."""
+    return zenoh.ext.declare_advanced_subscriber(
+        session, key_expr, callback,
+        history=zenoh.ext.HistoryConfig(detect_late_publishers=True))
 
 
 def encode(schema: str, body: dict[str, Any]) -> bytes:
