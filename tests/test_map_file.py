@@ -19,6 +19,7 @@ from daemon.mapping.settings import OdometryNoiseSettings
 from daemon.service.mapper import Mapper
 from daemon.store.export import export_map, import_map
 from daemon.store.sqlite_store import SCHEMA_VERSION, MapStore, SavedPose
+from daemon.vision.disambiguation import Feature, PairFeatures
 from daemon.vision.drawing import LANDMARK_COLOUR
 from kernel.errors import MapStoreError
 from kernel.se2 import SE2, UncertainSE2
@@ -177,6 +178,7 @@ def test_version_2_map_keeps_its_places_and_gains_background_estimates(tmp_path:
     db.execute("ALTER TABLE places DROP COLUMN background_estimate")
     db.execute("ALTER TABLE places DROP COLUMN signature")
     db.execute("DROP TABLE resume")
+    db.execute("DROP TABLE features")
     db.execute("UPDATE meta SET value = '2' WHERE key = 'schema_version'")
     db.commit()
     db.close()
@@ -193,6 +195,7 @@ def test_version_2_map_keeps_its_places_and_gains_background_estimates(tmp_path:
         assert all(p.signature is not None and p.signature.shape == (144,)
                    for p in store.load().places)
         assert store.saved_pose() is None  # v4's resume table, empty
+        assert store.features() == []  # v5's features table, empty
 
 
 def test_the_saved_pose_survives_a_reopen_and_bad_ones_are_refused(tmp_path: Path) -> None:
@@ -347,3 +350,31 @@ def test_the_map_frame_is_optimised_off_the_callers_thread_latest_result_kept(
                 thread.join(10)
         assert calls == [2, 2]
         assert mapper.map_frame is held  # the late start-up result was dropped
+
+
+def test_version_4_map_gains_the_features_table_and_keeps_the_rest(tmp_path: Path) -> None:
+    """Schema 5 (design §5): each look-alike pair's features, both ways; a version 4
+    file keeps its places, transitions and saved pose and gains an empty table."""
+    path = tmp_path / "v4.db"
+    cov = np.diag([0.0004, 0.0009, 0.0001])
+    with _two_places(path) as store:
+        store.save_pose(SavedPose(2, (0.1, 0.2, -0.3), cov, 200.0))
+    db = sqlite3.connect(path)
+    db.execute("DROP TABLE features")
+    db.execute("UPDATE meta SET value = '4' WHERE key = 'schema_version'")
+    db.commit()
+    db.close()
+    rng = np.random.default_rng(2)
+    fa = Feature(40, 8, rng.integers(0, 256, (24, 24)).astype(np.uint8), 0.95, 0.31)
+    fb = Feature(600, 16, rng.integers(0, 256, (16, 16)).astype(np.uint8), 0.9, 0.42)
+    with MapStore.open(path, GEOMETRY) as store:
+        assert store.meta("schema_version") == str(SCHEMA_VERSION) == "5"
+        assert [p.label for p in store.load().places] == ["dock", "door"]
+        assert store.transition_count() == 2 and store.saved_pose() is not None
+        assert store.features() == []
+        store.put_features(PairFeatures(1, 2, fa, fb))
+    with MapStore.open(path, GEOMETRY) as store:
+        (pair,) = store.features()
+    assert (pair.a_id, pair.b_id) == (1, 2)
+    assert np.array_equal(pair.a.template, fa.template) and pair.a.size == 24
+    assert (pair.b.col, pair.b.row, pair.b.own_ncc, pair.b.other_ncc) == (600, 16, 0.9, 0.42)

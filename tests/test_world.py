@@ -48,8 +48,11 @@ def test_office_size_and_aliased_doors() -> None:
     aliased = load_world("generate:aliased-corridor:1")
     doors = [d for w in aliased.walls for d in w.decorations if d.kind == "door"]
     assert len(doors) >= 16 and len({d.seed for d in doors}) == 1  # identical doors
-    at = sorted(d.at_m for d in aliased.walls[0].decorations)
+    at = sorted(d.at_m for d in aliased.walls[0].decorations if d.kind == "door")
     assert np.allclose(np.diff(at), 3.0)
+    signs = [d for d in aliased.walls[0].decorations if d.kind == "poster"]
+    assert len(signs) >= 8 and len({d.seed for d in signs}) == len(signs)  # each its own
+    assert all(d.width_m * d.height_m <= 0.2 for d in signs)  # small details
 
 
 def test_save_and_load_round_trip(tmp_path: Path) -> None:

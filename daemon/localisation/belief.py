@@ -33,6 +33,17 @@ class LocalisationEvent:
 
 
 @dataclass(frozen=True)
+class Disambiguation:
+    """Two look-alike places told apart by their features in this frame (design §5)."""
+
+    place_id: int  # chosen
+    other_id: int
+    ncc_place: float  # the chosen place's feature's best NCC in the view
+    ncc_other: float  # the other's
+    vote: float  # the weighed vote for the chosen place (> 0)
+
+
+@dataclass(frozen=True)
 class Belief:
     stamp_ns: int
     state: BeliefState
@@ -54,3 +65,4 @@ class Belief:
     acquisition: AcquisitionDecision | None = None  # learn a new place here (design §6)
     backgrounds: tuple[tuple[int, float], ...] = ()  # (place, background LRP) measured now
     event: LocalisationEvent | None = None  # a loss or a relocalisation in this frame
+    disambiguation: Disambiguation | None = None  # look-alikes told apart in this frame

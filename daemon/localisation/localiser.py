@@ -34,7 +34,13 @@ from typing import Literal
 
 import numpy as np
 
-from daemon.localisation.belief import Belief, BeliefState, LocalisationEvent, PlaceScore
+from daemon.localisation.belief import (
+    Belief,
+    BeliefState,
+    Disambiguation,
+    LocalisationEvent,
+    PlaceScore,
+)
 from daemon.localisation.global_localisation import LossDetector, PlaceSearch
 from daemon.localisation.local_positioning import LocalResult, PlaceTracker
 from daemon.localisation.odometry import OdometryBuffer, relative_motion
@@ -46,6 +52,7 @@ from daemon.mapping.odometry_chain import OdometryChain
 from daemon.mapping.place import Place
 from daemon.mapping.settings import AcquisitionSettings, OdometryNoiseSettings
 from daemon.mapping.transition import Transition
+from daemon.vision.disambiguation import Feature, PairFeatures, best_ncc, choose
 from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
 from daemon.vision.signature import signature, similarity
 from daemon.vision.unwarp import Unwarper
@@ -121,6 +128,10 @@ class Localiser:
         self.switcher = PlaceSwitcher(self.settings)
         self._pose_request: PoseRequest | None = None
         self._closure: CycleClosure | None = None
+        # Look-alike places' disambiguating features (design §5), by the pair's ids.
+        self._features: dict[frozenset[int], PairFeatures] = {}
+        self._ambiguous_frames = 0  # the search's pick ambiguous this many frames in a row
+        self._told_apart: Disambiguation | None = None  # in this frame
         self._frames = 0
         self.mode: Mode = "search"
         self.search = PlaceSearch(self.settings)
@@ -140,6 +151,12 @@ class Localiser:
         with self._lock:
             self._known = {**self._known, place.id: known}
             self.places = len(self._known)
+
+    def know_features(self, pair: PairFeatures) -> None:
+        """The disambiguating features of two look-alike places of the map (design §5).
+        Safe to call from another thread."""
+        with self._lock:
+            self._features = {**self._features, frozenset((pair.a_id, pair.b_id)): pair}
 
     def know_transition(self, transition: Transition) -> None:
         """A transition of the map, both ways. Safe to call from another thread."""
@@ -217,6 +234,7 @@ class Localiser:
         t0 = time.perf_counter()  # timing only; never used by the method
         self.panorama = self.unwarper.unwarp(frame.image)
         grey = to_grey(self.panorama)
+        self._told_apart = None
         timings = {"unwarp": (time.perf_counter() - t0) * 1e3}
         odo = self.odometry.at(frame.stamp_ns, max_extrapolation_ns=self.ODOMETRY_STALE_NS)
         motion = None
@@ -311,8 +329,9 @@ class Localiser:
             first = (self.tracker.place.id,) if self.tracker is not None else ()
             found_in = self._search_step(prepare, grey, places, first)
             best = self.search.best(places)
-            if best is not None:
-                self._start_in(grey, best.place_id)
+            pick = None if best is None else self._tell_apart(grey, best.place_id, places)
+            if pick is not None:
+                self._start_in(grey, pick)
             return found_in, None
         if local is None or self.tracker is None:
             return [], None  # a tracker started this frame
@@ -363,6 +382,46 @@ class Localiser:
                 else:
                     self._begin_search(stamp_ns, rejected={current}, keep_episode=True)
         return scored, None
+
+    def _tell_apart(self, grey: np.ndarray, best: int, places: list[int]) -> int | None:
+        """The search's pick (design §5, thesis §9.5): ``best`` unless places with
+        disambiguating features against it stand within ``ambiguity_margin`` of it. Those
+        must stay so for ``ambiguity_frames`` frames (None until then: the search goes
+        on, its scores may part); then their features decide (``choose``) — overruling
+        the lower levels only by ``disambiguation_min_vote``."""
+        s = self.settings
+        ranked = {c.place_id: c.lead for c in self.search.ranked()}
+        top = ranked[best]
+        rivals = [p for p, lead in sorted(ranked.items(), key=lambda kv: -kv[1])
+                  if p != best and p in places and top - lead <= s.ambiguity_margin]
+        rivals = [p for p in rivals[:4] if frozenset((best, p)) in self._features]
+        if not rivals:
+            self._ambiguous_frames = 0
+            return best
+        self._ambiguous_frames += 1
+        if self._ambiguous_frames < s.ambiguity_frames:
+            return None
+        self._ambiguous_frames = 0
+        contenders = [best, *rivals]
+        features: dict[tuple[int, int], Feature] = {}
+        for x in contenders:
+            for y in contenders:
+                pair = self._features.get(frozenset((x, y))) if x < y else None
+                if pair is not None:
+                    features[(pair.a_id, pair.b_id)] = pair.a
+                    features[(pair.b_id, pair.a_id)] = pair.b
+        winner, scores = choose(grey, features)
+        if scores[winner] - scores.get(best, 0.0) < s.disambiguation_min_vote:
+            winner = best  # the features barely disagree with the lower levels: keep theirs
+        runner_up = max((p for p in scores if p != winner
+                         and frozenset((winner, p)) in self._features),
+                        key=lambda p: scores[p])  # best, at least, is paired with each
+        pair = self._features[frozenset((winner, runner_up))]
+        mine, theirs = (pair.a, pair.b) if pair.a_id == winner else (pair.b, pair.a)
+        self._told_apart = Disambiguation(winner, runner_up, best_ncc(grey, mine),
+                                          best_ncc(grey, theirs),
+                                          scores[winner] - scores[runner_up])
+        return winner
 
     def _search_step(self, prepare: Callable[[], PreparedPanorama], grey: np.ndarray,
                      places: list[int], first: tuple[int, ...]) -> list[PlaceScore]:
@@ -531,7 +590,7 @@ class Localiser:
                       scores=scores, timings_ms=timings, recent_place=recent,
                       recent_place_lrp=recent_lrp, acquisition=decision,
                       backgrounds=background, switched_from=switched_from,
-                      closed_transition=closed)
+                      closed_transition=closed, disambiguation=self._told_apart)
         no_odometry = "" if odometry_ok else \
             "; no odometry at this frame (base silent): motion unknown"
         tracker = self.tracker

@@ -137,6 +137,20 @@ class LocalisationSettings:
     search_margin: float = setting(0.05, ge=0.0, le=1.0, doc="lost: a place leading the "
                                    "current one by this goes straight to global "
                                    "relocalisation (the robot was carried off)")
+    lookalike_margin: float = setting(0.1, ge=0.0, le=1.0, doc="a place recognised in a "
+                                      "new place's views within this of the new place's "
+                                      "own lead is its look-alike: the pair's "
+                                      "disambiguating features are found (design §5)")
+    max_lookalikes: int = setting(8, ge=0, le=1000, doc="features are found for at most "
+                                  "this many look-alikes of a new place, the closest")
+    ambiguity_margin: float = setting(0.1, ge=0.0, le=1.0, doc="the search's top two "
+                                      "within this of each other are ambiguous (§9.5)")
+    ambiguity_frames: int = setting(3, ge=1, le=100, doc="ambiguous this many frames in a "
+                                    "row: the pair's features decide (0 features: the "
+                                    "lower levels' best)")
+    disambiguation_min_vote: float = setting(0.15, ge=0.0, le=1.0, doc="the features "
+                                             "overrule the lower levels' pick only when "
+                                             "their place's vote leads its by this")
 
     def __post_init__(self) -> None:
         if len(self.initial_pose) != 3:

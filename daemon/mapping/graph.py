@@ -10,17 +10,33 @@ from collections.abc import Iterable
 
 from daemon.mapping.place import Place
 from daemon.mapping.transition import Transition
+from daemon.vision.disambiguation import PairFeatures
 
 
 class TopologicalMap:
-    def __init__(self, places: Iterable[Place] = (), transitions: Iterable[Transition] = ()
-                 ) -> None:
+    def __init__(self, places: Iterable[Place] = (), transitions: Iterable[Transition] = (),
+                 features: Iterable[PairFeatures] = ()) -> None:
         self._places: dict[int, Place] = {}
         self._edges: dict[int, dict[int, Transition]] = {}
+        self._features: dict[frozenset[int], PairFeatures] = {}  # look-alike pairs (§5)
         for p in places:
             self.add_place(p)
         for t in transitions:
             self.add_transition(t)
+        for f in features:
+            self.add_features(f)
+
+    def add_features(self, pair: PairFeatures) -> None:
+        """The disambiguating features of two look-alike places (design §5); replaces
+        the pair's earlier ones."""
+        if pair.a_id not in self._places or pair.b_id not in self._places:
+            raise KeyError(f"features of {pair.a_id} and {pair.b_id}: both places must be "
+                           "in the map")
+        self._features[frozenset((pair.a_id, pair.b_id))] = pair
+
+    @property
+    def features(self) -> list[PairFeatures]:
+        return list(self._features.values())
 
     def add_place(self, place: Place) -> None:
         if place.id <= 0:

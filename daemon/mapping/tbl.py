@@ -112,6 +112,10 @@ class TurnBackAndLook:
         self.frames = 0
         self.legs = cross_legs(settings.extent_m)
         self.leg = 0
+        # Grey views half-way out along each arm of the cross: the place seen a little off
+        # its reference (disambiguating features must survive that, design §5; from the
+        # tips a small sign 1 m off has changed too much); memory only.
+        self.views: list[np.ndarray] = []
         self._commanded = False
         self._last_odometry = start
 
@@ -158,6 +162,10 @@ class TurnBackAndLook:
             self.recognition_margin_frames += 1
         self.rows = result.rows
         self.frames += 1
+        out = not self.done and not self.legs[self.leg][0].startswith("back")
+        if out and self._commanded and len(self.views) == self.leg // 2 and \
+                math.hypot(pose[0], pose[1]) >= self.settings.extent_m / 2:
+            self.views.append(grey)  # half-way out along this arm
         if move_done and self._commanded:
             self.leg += 1
             self._commanded = False

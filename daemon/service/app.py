@@ -274,7 +274,8 @@ class Daemon:
                            settings=job_settings(self.config.tbl, request.extent_m),
                            unwarper=self._unwarper, feed=FrameFeed(rate),
                            mover=BaseCommands(lambda: self.base.device), mapper=self.mapper,
-                           reply=reply, on_done=self._learning_done, seen=self._seen)
+                           reply=reply, on_done=self._learning_done, seen=self._seen,
+                           localisation=self.config.localisation)
             self._job = job
             job.start()
         return job
@@ -295,8 +296,11 @@ class Daemon:
             added = self.mapper.graph.neighbours(p.id)
             if localiser is not None:
                 localiser.place_learned(p, added)
+                for pair in self.mapper.graph.features:
+                    if p.id in (pair.a_id, pair.b_id):
+                        localiser.know_features(pair)
             self.publish_event("place_learned", place=p.id, label=p.label,
-                               landmarks=p.landmark_count)
+                               landmarks=p.landmark_count, lookalikes=outcome.lookalikes)
             for t in added:
                 self.publish_event("transition_added", source=t.source,
                                    **{"from": t.from_id, "to": t.to_id})
@@ -453,6 +457,11 @@ class Daemon:
         elif event is not None:
             self.publish_event("relocalised", place=event.place_id, how=event.how,
                                took_s=round(event.took_s, 3), frames=event.frames)
+        told = belief.disambiguation
+        if told is not None:
+            self.publish_event("disambiguated", place=told.place_id, other=told.other_id,
+                               ncc_place=round(told.ncc_place, 4),
+                               ncc_other=round(told.ncc_other, 4), vote=round(told.vote, 4))
         try:
             self._maybe_acquire(belief)
         except PlacecellError as e:  # the map file refused: say so, keep localising

@@ -15,10 +15,11 @@ import queue
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from daemon.localisation.odometry import OdometryBuffer
+from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.place import Place
 from daemon.mapping.settings import TblSettings
 from daemon.mapping.tbl import Progress
@@ -134,6 +135,7 @@ class LearnOutcome:
     place: Place | None
     error: ErrorCode | None
     message: str
+    lookalikes: list[int] = field(default_factory=list)  # places it was told apart from
 
 
 class LearnJob:
@@ -145,10 +147,13 @@ class LearnJob:
     def __init__(self, *, label: str, settings: TblSettings, unwarper: Unwarper,
                  feed: FrameFeed, mover: BaseCommands, mapper: Mapper, reply: Reply,
                  on_done: Callable[[LearnJob, LearnOutcome], None],
-                 seen: Callable[[], Seen | None] = lambda: None) -> None:
+                 seen: Callable[[], Seen | None] = lambda: None,
+                 localisation: LocalisationSettings | None = None) -> None:
         """``seen``: the localiser's reliable estimate of the robot now, if any (it joins
-        the new place to the map, design §6)."""
+        the new place to the map, design §6); ``localisation``: how look-alike places
+        are found (design §5)."""
         self.label = label
+        self.localisation = localisation or LocalisationSettings()
         self._seen = seen
         self.settings = settings
         self.unwarper = unwarper
@@ -202,6 +207,12 @@ class LearnJob:
                           created_unix_s=time.time())
             stored, transitions = self.mapper.add_place(place, self._link)
             outcome = LearnOutcome(stored, None, "")
+            self._reply("progress", {"phase": "lookalikes", "fraction": 1.0})
+            try:
+                pairs = self.mapper.learn_features(stored.id, tbl.views, self.localisation)
+                outcome = LearnOutcome(stored, None, "", [p.b_id for p in pairs])
+            except Exception:  # noqa: BLE001 - the place is stored; features can be redone
+                log.exception("place %d: its look-alikes' features were not found", stored.id)
             self._reply("result", {
                 "place": {"id": stored.id, "label": stored.label,
                           "landmarks": stored.landmark_count,

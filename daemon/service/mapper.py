@@ -13,17 +13,33 @@ import dataclasses
 import logging
 import threading
 
+import numpy as np
+
+from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.embedding import embed
 from daemon.mapping.graph import TopologicalMap
+from daemon.mapping.lookalikes import lookalikes, pair_features
 from daemon.mapping.odometry_chain import OdometryChain
 from daemon.mapping.place import Place, with_cues
 from daemon.mapping.settings import OdometryNoiseSettings
 from daemon.mapping.transition import Transition, TransitionSource
 from daemon.store.sqlite_store import MapStore, PlaceSummary
+from daemon.vision.disambiguation import PairFeatures
+from daemon.vision.recognition import PreparedTemplates
+from kernel.panorama import to_grey
 from kernel.se2 import SE2, UncertainSE2
 from kernel.types import Odometry
 
 log = logging.getLogger(__name__)
+
+
+def _background(place: Place) -> float:
+    """The place's background LRP: measured, else the estimate made when it was
+    learned, else the default (design §9)."""
+    for value in (place.background_lrp, place.background_estimate):
+        if value is not None:
+            return value
+    return LocalisationSettings().background_lrp
 
 
 @dataclasses.dataclass(frozen=True)
@@ -143,6 +159,36 @@ class Mapper:
             self._last_place, self._chain, self._pending = stored.id, self._pending, None
         self.reembed()
         return stored, added
+
+    def learn_features(self, place_id: int, views: list[np.ndarray],
+                       settings: LocalisationSettings) -> list[PairFeatures]:
+        """The disambiguating features of a place just learned and each of its look-alikes
+        (design §5), stored and in the map; ``views``: grey panoramas from the tips of
+        its Turn Back and Look cross. A read-only map gets none."""
+        if self.store.readonly or settings.max_lookalikes == 0:
+            return []
+        with self._lock:
+            place = self.graph.place(place_id)
+            others = {p.id: (PreparedTemplates.of(p.landmarks.templates()),
+                             _background(p)) for p in self.graph.places if p.id != place_id}
+        margin = place.landmarks.margin
+        reference = to_grey(self.store.reference_panorama(place_id))
+        own_views = [reference, *views]
+        found = lookalikes(own_views, PreparedTemplates.of(place.landmarks.templates()),
+                           _background(place), others, settings.lookalike_margin,
+                           settings.max_lookalikes)
+        pairs = []
+        for other in found:
+            pair = pair_features(place_id, own_views, other,
+                                 to_grey(self.store.reference_panorama(other)), margin)
+            with self._lock:
+                self.store.put_features(pair)
+                self.graph.add_features(pair)
+            pairs.append(pair)
+            log.info("place %d looks like place %d: features %d px at column %d against "
+                     "%d px at %d", place_id, other, pair.a.size, pair.a.col, pair.b.size,
+                     pair.b.col)
+        return pairs
 
     def add_transition(self, transition: Transition) -> None:
         """A transition measured while localising (a closed cycle, §7.1.3), both ways; the

@@ -30,12 +30,13 @@ from daemon.mapping.graph import TopologicalMap
 from daemon.mapping.place import Place
 from daemon.mapping.transition import Transition
 from daemon.store import codec
+from daemon.vision.disambiguation import Feature, PairFeatures
 from kernel.errors import MapStoreError
 from kernel.se2 import SE2, UncertainSE2
 
 log = logging.getLogger(__name__)
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 APPLICATION = "placecell-map"
 
 _SCHEMA = """
@@ -76,7 +77,17 @@ CREATE TABLE resume (                                     -- v4: where the robot
     saved_unix_s REAL NOT NULL
 )
 """
-_SCHEMA += ";" + _RESUME_TABLE
+_FEATURES_TABLE = """
+CREATE TABLE features (                                   -- v5: disambiguating features
+    place_id  INTEGER NOT NULL REFERENCES places(id),     -- the place the patch is cut from
+    other_id  INTEGER NOT NULL REFERENCES places(id),     -- the look-alike it tells it from
+    col INTEGER NOT NULL, row INTEGER NOT NULL,           -- in place_id's reference core
+    template  BLOB NOT NULL,                              -- side x side uint8, row-major
+    own_ncc   REAL NOT NULL, other_ncc REAL NOT NULL,     -- daemon/vision/disambiguation.py
+    PRIMARY KEY (place_id, other_id)
+)
+"""
+_SCHEMA += ";" + _RESUME_TABLE + ";" + _FEATURES_TABLE
 
 
 _PLACE_COLUMNS = ("id, label, created_unix_s, background_lrp, landmarks, local_space, "
@@ -225,7 +236,7 @@ class MapStore:
         :meth:`reference_panorama`); every landmark set's digest checked."""
         rows = self._all(f"SELECT {_PLACE_COLUMNS} FROM places ORDER BY id")
         places = [self._decode_place(r) for r in rows]
-        return TopologicalMap(places, self.transitions())
+        return TopologicalMap(places, self.transitions(), self.features())
 
     def _decode_place(self, row: Sequence[Any]) -> Place:
         pid, label, created, background, lm_blob, ls_blob, stored, estimate, sig = row
@@ -302,6 +313,28 @@ class MapStore:
                 (saved.place_id, *map(float, saved.pose), cov.tobytes(),
                  float(saved.saved_unix_s)))
 
+    def put_features(self, pair: PairFeatures) -> None:
+        """Store (or replace) the features of a pair of look-alike places, both ways, in
+        one transaction."""
+        self._writable()
+        with self._lock, _transaction(self._db):
+            for place_id, other_id, f in ((pair.a_id, pair.b_id, pair.a),
+                                          (pair.b_id, pair.a_id, pair.b)):
+                self._db.execute(
+                    "INSERT OR REPLACE INTO features(place_id, other_id, col, row, template, "
+                    "own_ncc, other_ncc) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                    (place_id, other_id, f.col, f.row,
+                     np.ascontiguousarray(f.template, dtype=np.uint8).tobytes(),
+                     float(f.own_ncc), float(f.other_ncc)))
+
+    def features(self) -> list[PairFeatures]:
+        """Every pair's features (each pair once, the lower id first)."""
+        rows = self._all("SELECT place_id, other_id, col, row, template, own_ncc, other_ncc "
+                         "FROM features ORDER BY place_id, other_id")
+        by_key = {(int(r[0]), int(r[1])): _feature(r, self.path) for r in rows}
+        return [PairFeatures(a, b, fa, by_key[(b, a)])
+                for (a, b), fa in by_key.items() if a < b and (b, a) in by_key]
+
     def saved_pose(self) -> SavedPose | None:
         """The pose saved last, or None (none saved, or its place is gone)."""
         row = self._one("SELECT r.place_id, r.x, r.y, r.yaw, r.covariance, r.saved_unix_s "
@@ -365,6 +398,15 @@ class MapStore:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _feature(r: Sequence[Any], path: Path) -> Feature:
+    raw = np.frombuffer(bytes(r[4]), dtype=np.uint8)
+    side = int(round(raw.size ** 0.5))
+    if side * side != raw.size or side == 0:
+        raise MapStoreError(f"{path}: the feature of place {r[0]} against {r[1]} is damaged")
+    return Feature(int(r[2]), int(r[3]), raw.reshape(side, side).copy(), float(r[5]),
+                   float(r[6]))
 
 
 def _transition(r: Sequence[Any]) -> Transition:
@@ -444,13 +486,16 @@ def _migrate(db: sqlite3.Connection, p: Path, version: int) -> None:
     """To the current version, in one transaction: 1 (meta, empty places and transitions
     tables) is rebuilt; 2 gains places.background_estimate and places.signature (NULL:
     the daemon's mapper makes them from the stored reference panoramas); 2 and 3 gain
-    the resume table (no pose saved)."""
+    the resume table (no pose saved); 2 to 4 gain the features table (none yet: the
+    daemon's mapper finds the look-alike pairs and their features)."""
     with _transaction(db):
         if version == 2:
             db.execute("ALTER TABLE places ADD COLUMN background_estimate REAL")
             db.execute("ALTER TABLE places ADD COLUMN signature BLOB")
         if version in (2, 3):
             db.execute(_RESUME_TABLE)
+        if version in (2, 3, 4):
+            db.execute(_FEATURES_TABLE)
             db.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'",
                        (str(SCHEMA_VERSION),))
         if version == 1:

@@ -1,8 +1,8 @@
 """World generator: ``generate(kind, seed)``; the same kind and seed give the same world.
 
-Kinds: ``office`` (rooms off a corridor, about 30 x 20 m), ``corridor``, ``aliased-corridor``
-(identical doors at a fixed spacing, nothing else to tell places apart), ``open-room`` (a
-cluttered 7 x 10 m room).
+Kinds: ``office`` (rooms off a corridor, about 30 x 20 m), ``corridor``,
+``aliased-corridor`` (identical doors at a fixed spacing; a small sign beside each is the
+only thing that tells places apart), ``open-room`` (a cluttered 7 x 10 m room).
 """
 
 from __future__ import annotations
@@ -103,12 +103,17 @@ def _corridor(rng: np.random.Generator, seed: int) -> World:
 
 def _aliased_corridor(rng: np.random.Generator, seed: int) -> World:
     # Identical doors every 3 m on both walls; the walls themselves are plain and equal.
+    # Beside each door on one wall, a small sign of its own (0.5 x 0.4 m, a notice
+    # board): the only thing that tells one stretch of corridor from the next.
     length, width, spacing = 30.0, 2.4, 3.0
     door_seed = int(rng.integers(1 << 30))
-    doors = tuple(Decoration("door", x, 0.9, 0.0, 2.05, door_seed)
-                  for x in np.arange(1.05, length - 1.0, spacing))
+    at = np.arange(1.05, length - 1.0, spacing)
+    doors = tuple(Decoration("door", float(x), 0.9, 0.0, 2.05, door_seed) for x in at)
+    signs = tuple(Decoration("poster", round(float(x) + 1.05, 3), 0.5, 1.2, 0.4,
+                             int(rng.integers(1 << 30))) for x in at if x + 1.3 < length)
     colour = (190, 200, 205)
-    walls = [Wall(((0.0, 0.0), (length, 0.0)), "plain", colour, decorations=doors, seed=1),
+    walls = [Wall(((0.0, 0.0), (length, 0.0)), "plain", colour, decorations=doors + signs,
+                  seed=1),
              Wall(((length, width), (0.0, width)), "plain", colour,
                   decorations=tuple(Decoration("door", length - d.at_m - d.width_m, d.width_m,
                                                0.0, 2.05, door_seed) for d in doors), seed=1),

@@ -20,6 +20,7 @@ GROUPS = {
     "mapfile": "tools.bench.mapfile",
     "localisation": "tools.bench.localisation",
     "global": "tools.bench.global_search",
+    "disambiguation": "tools.bench.disambiguation",
 }
 
 

@@ -161,6 +161,8 @@ class Run:
             Place(tbl.result(), tbl.reference_panorama, label=label), link[0])
         place = dataclasses.replace(stored, reference_panorama=None)
         self.localiser.place_learned(place, added)  # as the daemon does
+        for pair in self.mapper.learn_features(place.id, tbl.views, self.cfg.localisation):
+            self.localiser.know_features(pair)
         self.references[place.id] = SE2.of(truth[0])
         return place
 

@@ -1,0 +1,176 @@
+"""Disambiguating features (SPEC §5, thesis chapter 6 and §9.5): the patch of one place's
+view that a look-alike place lacks, and the decision between the two by it.
+
+For a pair of places A and B that the lower levels cannot tell apart, A's feature is the
+template of A's view — position and size from :data:`SIZES` — whose best NCC anywhere in
+B's view is lowest (§6.1). The thesis scored one image and found the feature unreliable
+when the robot stood a little off the reference; here a candidate is also matched in A's
+other views (the Turn Back and Look frames, taken up to the cross's arm from the
+reference) near where it was cut, and the score is its worst match there minus its best
+match in B:
+
+    score(t) = min_v∈A′ max_near NCC(v, t) − max_v∈B max_anywhere NCC(v, t)
+
+Deciding for a current view (§9.5): both features are searched for in the whole view
+(the robot may be turned); the place whose feature correlates higher wins — each
+correlation first set against what its feature scores in either place (:func:`decide`).
+
+Views are grey panoramas with their wrap margin; columns and rows are of the core.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from daemon.vision.ncc import ncc_map
+from kernel.panorama import core_of
+
+SIZES = (16, 24, 32)  # square template sides, pixels
+GRID_STEP = 8  # candidates are cut every GRID_STEP columns and rows
+CANDIDATES_PER_SIZE = 120  # the most textured candidates of each size are scored
+MIN_STD = 8.0  # grey levels: flatter patches match anything (or nothing) by chance
+NEAR_COLS, NEAR_ROWS = 48, 12  # how far a feature may move in its own place's other views
+# (24° and 7°: a patch 1.2 m away seen from the tip of a 0.5 m cross)
+
+
+@dataclass(frozen=True)
+class Feature:
+    """A patch of one place's view that the other place of a pair lacks."""
+
+    col: int  # core column of its left edge in the reference view
+    row: int  # row of its top edge
+    template: np.ndarray  # (size, size) uint8
+    own_ncc: float  # its worst match in its own place's other views (1 with none)
+    other_ncc: float  # its best match anywhere in the other place's views
+
+    @property
+    def size(self) -> int:
+        return int(self.template.shape[0])
+
+    @property
+    def score(self) -> float:
+        return self.own_ncc - self.other_ncc
+
+
+@dataclass(frozen=True)
+class PairFeatures:
+    """The features of two look-alike places: ``a`` cut from A's view against B, ``b``
+    from B's against A."""
+
+    a_id: int
+    b_id: int
+    a: Feature
+    b: Feature
+
+    def __post_init__(self) -> None:
+        if self.a_id == self.b_id:
+            raise ValueError(f"a pair of places, not place {self.a_id} twice")
+
+
+@dataclass(frozen=True)
+class Decision:
+    """Which of a pair the current view is, and the evidence: each feature's best NCC
+    in it and the weighed vote (> 0 for A)."""
+
+    winner: Literal["a", "b"]
+    ncc_a: float
+    ncc_b: float
+    vote: float
+
+
+def find_feature(own: list[np.ndarray], other: list[np.ndarray], margin: int) -> Feature:
+    """The feature of the place whose views are ``own`` (the reference first, then any
+    others of the same place) against the place whose views are ``other``."""
+    if not own or not other:
+        raise ValueError("a feature needs at least one view of each place")
+    reference = core_of(own[0], margin)
+    best: Feature | None = None
+    for size in SIZES:
+        for col, row in _textured_candidates(reference, size):
+            template = np.ascontiguousarray(reference[row:row + size, col:col + size])
+            # The wrap margin lets a match straddle the seam.
+            other_ncc = max(float(ncc_map(v, template).max()) for v in other)
+            if best is not None and 1.0 - other_ncc <= best.score:
+                continue  # cannot beat the best even if it persists perfectly
+            own_ncc = min((_near(v, margin, template, col, row) for v in own[1:]),
+                          default=1.0)
+            candidate = Feature(col, row, template, own_ncc, other_ncc)
+            if best is None or candidate.score > best.score:
+                best = candidate
+    if best is None:
+        raise ValueError("the view has no textured patch to tell it by")
+    return best
+
+
+def decide(view: np.ndarray, feature_a: Feature, feature_b: Feature) -> Decision:
+    """A's feature against B's in the current grey ``view`` (with its wrap margin),
+    each searched for anywhere in it.
+
+    The thesis lets the higher correlation win. That fails when one place has all the
+    other has and more (a sign beside one of two identical doors): the plainer place's
+    best feature matches well in both. So each correlation is first placed between what
+    its feature scores in the other place (0) and in its own (1), and the two votes are
+    weighed by each feature's score (how far apart those two are):
+
+        e = clip((c − c_other) / (c_own − c_other), 0, 1),  d = w_a (e_a − ½) − w_b (e_b − ½)
+
+    A wins when d ≥ 0; with equally good features this is the thesis's rule."""
+    a = best_ncc(view, feature_a)
+    b = best_ncc(view, feature_b)
+    d = vote(a, feature_a) - vote(b, feature_b)
+    return Decision("a" if d >= 0.0 else "b", a, b, d)
+
+
+def choose(view: np.ndarray, features: dict[tuple[int, int], Feature]
+           ) -> tuple[int, dict[int, float]]:
+    """Among several look-alikes: ``features[(x, y)]`` is x's feature against y. Each
+    place scores the mean vote of its own features in ``view`` (a place whose features
+    are missing here scores below one whose features say nothing, which scores below
+    one whose features are seen); the highest wins. For two places this is
+    :func:`decide`. Returns the winner and every place's score."""
+    votes: dict[int, list[float]] = {}
+    for (x, _y), feature in features.items():
+        votes.setdefault(x, []).append(vote(best_ncc(view, feature), feature))
+    scores = {x: float(np.mean(v)) for x, v in votes.items()}
+    return max(scores, key=lambda x: scores[x]), scores
+
+
+def best_ncc(view: np.ndarray, feature: Feature) -> float:
+    """The feature's best NCC anywhere in the grey ``view`` (with its wrap margin)."""
+    return float(ncc_map(view, feature.template).max())
+
+
+def vote(ncc: float, feature: Feature) -> float:
+    """The feature's vote for its place when it matches ``ncc`` (see :func:`decide`)."""
+    span = feature.own_ncc - feature.other_ncc
+    if span <= 1e-6:
+        return 0.0  # the other place has it too: no evidence either way
+    e = min(max((ncc - feature.other_ncc) / span, 0.0), 1.0)
+    return span * (e - 0.5)
+
+
+def _textured_candidates(core: np.ndarray, size: int) -> list[tuple[int, int]]:
+    """Grid positions of the ``CANDIDATES_PER_SIZE`` most textured size x size patches."""
+    h, w = core.shape
+    spots = [(c, r) for r in range(0, h - size + 1, GRID_STEP)
+             for c in range(0, w - size + 1, GRID_STEP)]
+    stds = np.array([float(core[r:r + size, c:c + size].std()) for c, r in spots])
+    order = np.argsort(-stds)
+    return [spots[i] for i in order[:CANDIDATES_PER_SIZE] if stds[i] >= MIN_STD]
+
+
+def _near(view: np.ndarray, margin: int, template: np.ndarray, col: int, row: int) -> float:
+    """Best NCC of ``template`` within NEAR_COLS / NEAR_ROWS of (col, row) in ``view``."""
+    size = template.shape[0]
+    h = view.shape[0]
+    r0 = max(0, row - NEAR_ROWS)
+    r1 = min(h, row + size + NEAR_ROWS)
+    core_w = view.shape[1] - 2 * margin
+    idx = np.arange(col - NEAR_COLS, col + size + NEAR_COLS) % core_w + margin
+    window = np.take(view[r0:r1], idx, axis=1)
+    scores = ncc_map(window, template)
+    return float(scores.max()) if scores.size else -1.0
+
