@@ -109,7 +109,8 @@ class PlaceTracker:
         found = self._track(grey, predicted, min(radius, self.width // 2 - TEMPLATE))
         # Rows follow the landmarks (their elevation changes with distance) while tracked.
         self.rows = np.where(found.scores >= self.settings.min_ncc, found.rows, self.rows)
-        return self._weigh(found, self._scale_kept(predicted))  # step 3
+        kept = self._scale_kept(predicted)
+        return self._weigh(found, kept * self._innovation_gate(found, predicted, kept))
 
     def start_anywhere(self, grey: np.ndarray, radius_m: float,
                        centre: tuple[float, float] = (0.0, 0.0)) -> LocalResult:
@@ -152,10 +153,12 @@ class PlaceTracker:
         self.confidence = raw_output(at_estimate, weights)
         # How much of the place is seen where the estimate expects it: every landmark
         # usable from here counted, seen or not (a kidnapped robot sees few, and fits
-        # those few well); NaN with fewer than three usable (no evidence either way).
+        # those few well); NaN with fewer than ``evidence_landmarks`` usable: no evidence
+        # either way (leaving a place, on odometry; and a few landmarks fitted well are
+        # found in wrong modes metres off, where the rest are out of range).
         usable = float(kept.sum())
-        self.support = float((at_estimate * weights).sum() / usable) if usable >= 3 \
-            else math.nan
+        self.support = float((at_estimate * weights).sum() / usable) \
+            if usable >= self.settings.evidence_landmarks else math.nan
         return LocalResult(self.estimate, self.confidence, self.support)
 
     def move_to(self, pose: tuple[float, float, float], covariance: np.ndarray) -> None:
@@ -181,6 +184,36 @@ class PlaceTracker:
         support = (fits * (weights > 0)).sum(axis=1)  # m <= 2 sigma_tight
         best = fits[int(np.argmax(support))]
         return np.where(best, 1.0, 0.1)
+
+    def _innovation_gate(self, found: Track, pose: tuple[float, float, float],
+                         kept: np.ndarray) -> np.ndarray:
+        """1 for the landmarks found within ``innovation_gate`` standard deviations of
+        where the predicted pose expects them, else 0 — an innovation gate, as an EKF
+        keeps: a landmark coming into range near a place (its scale now close enough)
+        whose template locks onto a look-alike 15-20° off, or whose depth from the
+        cross is off, would pull the estimate by decimetres. σ² = σ_bearing² (by NCC)
+        + σ_θ² + (σ_xy² + σ_landmark²) / range². When fewer than half of the found
+        landmarks pass, the estimate itself is in doubt: nothing is gated."""
+        s = self.settings
+        if s.innovation_gate <= 0 or self.estimate is None:
+            return np.ones(len(kept))
+        g = self.geometry
+        dx, dy = g.mean[:, 0] - pose[0], g.mean[:, 1] - pose[1]
+        expected = np.arctan2(dy, dx) - pose[2]
+        bearings = column_to_bearing_of_centre(found.cols, self.width)
+        residual = np.abs(np.asarray(wrap_angle(bearings - expected)))
+        cov = self.estimate.covariance
+        range2 = np.maximum(dx * dx + dy * dy, 0.01)
+        sigma_b = math.radians(s.bearing_sigma_deg) * (
+            1.0 + 10.0 * (1.0 - np.clip(found.scores, 0.0, 1.0)))
+        var = sigma_b**2 + max(cov[2, 2], 0.0) + (
+            max(cov[0, 0] + cov[1, 1], 0.0) / 2 + np.trace(g.covariance, axis1=1, axis2=2) / 2
+        ) / range2
+        passed = (residual <= s.innovation_gate * np.sqrt(var)).astype(float)
+        found_here = (found.scores >= s.min_ncc) & (kept > 0)
+        if (passed * found_here).sum() < 0.5 * found_here.sum():
+            return np.ones(len(kept))
+        return passed
 
     def _scale_kept(self, pose: tuple[float, float, float]) -> np.ndarray:
         """1 for landmarks that appear at most ``max_zoom`` times larger or smaller than

@@ -53,6 +53,10 @@ class LocalisationSettings:
                                            doc="assumed-depth model: its std")
     far_depth_m: float = setting(30.0, gt=1.0, le=1000.0, doc="a landmark without a finite "
                                  "depth estimate stands this far, as far uncertain")
+    innovation_gate: float = setting(3.0, ge=0.0, le=100.0, doc="while tracking, a "
+                                     "landmark found more than this many standard "
+                                     "deviations from where the predicted pose expects "
+                                     "it is left out for the frame (0: off)")
     gate_sigma: float = setting(3.0, gt=0.0, le=20.0, doc="ellipsoid model: the ellipse "
                                 "holds this many standard deviations; a ray missing it "
                                 "scores 0 (eq. 8.33)")
@@ -119,6 +123,9 @@ class LocalisationSettings:
                                       "relocalised estimate must also reach this raw "
                                       "output (not just be sure of itself: a wrong mode "
                                       "can be)")
+    evidence_landmarks: int = setting(8, ge=1, le=1000, doc="loss and recovery are "
+                                      "judged only where at least this many of the "
+                                      "place's landmarks are usable from the estimate")
     recovery_frames: int = setting(3, ge=1, le=1000, doc="frames each recovery step is "
                                    "given to become reliable before the next is tried")
     confirm_frames: int = setting(15, ge=1, le=10_000, doc="a place chosen by global "
