@@ -43,6 +43,9 @@ class ZenohSettings:
     listen: list[str] = setting(["tcp/127.0.0.1:7447"], doc="endpoints to listen on")
     connect: list[str] = setting([], doc="endpoints to connect to")
     multicast_scouting: bool = setting(False, doc="off: nothing leaves the machine unasked")
+    config_file: str = setting("", doc="a zenoh JSON5 configuration read first (access "
+                               "control, authentication: config/zenoh-acl.json5); the "
+                               "keys above override its mode and endpoints")
 
 
 @dataclass(frozen=True)

@@ -42,7 +42,8 @@ def open_client(args: argparse.Namespace) -> tuple[zenoh.Session, str]:
     robot, listen = _endpoints_from_config(args.config)
     connect = args.connect or [ep for ep in listen if not ep.endswith(":0")]
     session = zenoh_link.open_session(
-        "peer", ["tcp/127.0.0.1:0"], connect, multicast_scouting=False)
+        "peer", ["tcp/127.0.0.1:0"], connect, multicast_scouting=False,
+        config_file=args.zenoh_config or "")
     return session, args.robot or robot or "*"
 
 
@@ -426,6 +427,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--connect", action="append",
                         help="zenoh endpoint of the daemon (default: its listen endpoints)")
     parser.add_argument("--robot", help="robot name (default: from the configuration)")
+    parser.add_argument("--zenoh-config", metavar="FILE",
+                        help="a zenoh JSON5 file with this client's credentials "
+                        "(transport.auth.usrpwd), for a daemon with access control")
     parser.add_argument("--timeout", type=float, default=3.0, help="seconds to wait for answers")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("status", help="show the daemon's health, rates and belief")

@@ -167,7 +167,8 @@ class Daemon:
     def _open_zenoh(self) -> None:
         z = self.config.zenoh
         self._session = zenoh_link.open_session(z.mode, z.listen, z.connect,
-                                                z.multicast_scouting, timestamping=True)
+                                                z.multicast_scouting, timestamping=True,
+                                                config_file=z.config_file)
         s = self._session
         self._token = s.liveliness().declare_token(zenoh_link.key(self.robot, "alive"))
         for leaf in ("status", "belief", "pose"):

@@ -30,10 +30,15 @@ EVENTS_KEPT = 32
 
 
 def make_config(mode: str, listen: list[str], connect: list[str],
-                multicast_scouting: bool, timestamping: bool = False) -> zenoh.Config:
+                multicast_scouting: bool, timestamping: bool = False,
+                config_file: str = "") -> zenoh.Config:
     """A zenoh configuration that touches only the endpoints given; ``timestamping``
-    for a session whose publishers keep a cache (the daemon's)."""
-    conf = zenoh.Config()
+    for a session whose publishers keep a cache (the daemon's); ``config_file``: a zenoh
+    JSON5 file read first (access control and credentials, design §11)."""
+    try:
+        conf = zenoh.Config.from_file(config_file) if config_file else zenoh.Config()
+    except Exception as e:  # zenoh's own error for a missing or malformed file
+        raise ConfigError(f"[zenoh] config_file {config_file!r}: {e}") from e
     try:
         conf.insert_json5("mode", json.dumps(mode))
         conf.insert_json5("listen/endpoints", json.dumps(listen))
@@ -47,8 +52,9 @@ def make_config(mode: str, listen: list[str], connect: list[str],
 
 
 def open_session(mode: str, listen: list[str], connect: list[str],
-                 multicast_scouting: bool, timestamping: bool = False) -> zenoh.Session:
-    conf = make_config(mode, listen, connect, multicast_scouting, timestamping)
+                 multicast_scouting: bool, timestamping: bool = False,
+                 config_file: str = "") -> zenoh.Session:
+    conf = make_config(mode, listen, connect, multicast_scouting, timestamping, config_file)
     try:
         return zenoh.open(conf)
     except Exception as e:
