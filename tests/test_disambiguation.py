@@ -140,7 +140,7 @@ def test_among_several_look_alikes_the_one_whose_features_are_seen_wins() -> Non
     features = {(x, y): find_feature([_wrap(cores[x])], [_wrap(cores[y])], M)
                 for x in cores for y in cores if x != y}
     for pid, core in cores.items():
-        winner, scores = choose(_wrap(_moved(core, rng, 90)), features)
+        winner, scores, _ = choose(_wrap(_moved(core, rng, 90)), features)
         assert winner == pid, scores
         assert all(scores[pid] - s > 0.1 for p, s in scores.items() if p != pid), scores
 

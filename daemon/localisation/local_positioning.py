@@ -141,8 +141,7 @@ class PlaceTracker:
         f = self.filter
         bearings = column_to_bearing_of_centre(found.cols, self.width)
         weights = ncc_weights(found.scores, self.settings.min_ncc) * kept
-        sigma_bearing = math.radians(self.settings.bearing_sigma_deg) * (
-            1.0 + 10.0 * (1.0 - np.clip(found.scores, 0.0, 1.0)))
+        sigma_bearing = self._bearing_sigma(found.scores)
         if self.settings.consensus_sigma_deg > 0:
             weights = weights * self._consensus(bearings, weights)
         likelihood = self.model(f.particles, bearings, sigma_bearing, self.geometry)
@@ -185,6 +184,11 @@ class PlaceTracker:
         best = fits[int(np.argmax(support))]
         return np.where(best, 1.0, 0.1)
 
+    def _bearing_sigma(self, ncc: np.ndarray) -> np.ndarray:
+        """A tracked bearing's std: ``bearing_sigma_deg`` at NCC 1, growing as it falls."""
+        return math.radians(self.settings.bearing_sigma_deg) * (
+            1.0 + 10.0 * (1.0 - np.clip(ncc, 0.0, 1.0)))
+
     def _innovation_gate(self, found: Track, pose: tuple[float, float, float],
                          kept: np.ndarray) -> np.ndarray:
         """1 for the landmarks found within ``innovation_gate`` standard deviations of
@@ -204,9 +208,7 @@ class PlaceTracker:
         residual = np.abs(np.asarray(wrap_angle(bearings - expected)))
         cov = self.estimate.covariance
         range2 = np.maximum(dx * dx + dy * dy, 0.01)
-        sigma_b = math.radians(s.bearing_sigma_deg) * (
-            1.0 + 10.0 * (1.0 - np.clip(found.scores, 0.0, 1.0)))
-        var = sigma_b**2 + max(cov[2, 2], 0.0) + (
+        var = self._bearing_sigma(found.scores) ** 2 + max(cov[2, 2], 0.0) + (
             max(cov[0, 0] + cov[1, 1], 0.0) / 2 + np.trace(g.covariance, axis1=1, axis2=2) / 2
         ) / range2
         passed = (residual <= s.innovation_gate * np.sqrt(var)).astype(float)

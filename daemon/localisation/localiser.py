@@ -52,7 +52,7 @@ from daemon.mapping.odometry_chain import OdometryChain
 from daemon.mapping.place import Place
 from daemon.mapping.settings import AcquisitionSettings, OdometryNoiseSettings
 from daemon.mapping.transition import Transition
-from daemon.vision.disambiguation import Feature, PairFeatures, best_ncc, choose
+from daemon.vision.disambiguation import Feature, PairFeatures, choose
 from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
 from daemon.vision.signature import signature, similarity
 from daemon.vision.unwarp import Unwarper
@@ -410,16 +410,14 @@ class Localiser:
                 if pair is not None:
                     features[(pair.a_id, pair.b_id)] = pair.a
                     features[(pair.b_id, pair.a_id)] = pair.b
-        winner, scores = choose(grey, features)
+        winner, scores, nccs = choose(grey, features)
         if scores[winner] - scores.get(best, 0.0) < s.disambiguation_min_vote:
             winner = best  # the features barely disagree with the lower levels: keep theirs
         runner_up = max((p for p in scores if p != winner
                          and frozenset((winner, p)) in self._features),
                         key=lambda p: scores[p])  # best, at least, is paired with each
-        pair = self._features[frozenset((winner, runner_up))]
-        mine, theirs = (pair.a, pair.b) if pair.a_id == winner else (pair.b, pair.a)
-        self._told_apart = Disambiguation(winner, runner_up, best_ncc(grey, mine),
-                                          best_ncc(grey, theirs),
+        self._told_apart = Disambiguation(winner, runner_up, nccs[(winner, runner_up)],
+                                          nccs[(runner_up, winner)],
                                           scores[winner] - scores[runner_up])
         return winner
 

@@ -2,7 +2,8 @@
 §5; thesis chapter 6).
 
 A place already in the map is a *look-alike* of the one being learned when, over the new
-place's views (its reference and the tips of its Turn Back and Look cross), the lower
+place's views (its reference and views half-way out along the arms of its Turn Back
+and Look cross), the lower
 level recognises it nearly as well as the new place itself: its LRP minus background
 within ``margin`` of the new place's. For each look-alike the pair's features are found
 (daemon/vision/disambiguation.py): the new place's against the other's reference view,

@@ -33,13 +33,13 @@ from kernel.types import Odometry
 log = logging.getLogger(__name__)
 
 
-def _background(place: Place) -> float:
+def _background(place: Place, default: float) -> float:
     """The place's background LRP: measured, else the estimate made when it was
-    learned, else the default (design §9)."""
+    learned, else ``default`` (design §9)."""
     for value in (place.background_lrp, place.background_estimate):
         if value is not None:
             return value
-    return LocalisationSettings().background_lrp
+    return default
 
 
 @dataclasses.dataclass(frozen=True)
@@ -163,19 +163,21 @@ class Mapper:
     def learn_features(self, place_id: int, views: list[np.ndarray],
                        settings: LocalisationSettings) -> list[PairFeatures]:
         """The disambiguating features of a place just learned and each of its look-alikes
-        (design §5), stored and in the map; ``views``: grey panoramas from the tips of
-        its Turn Back and Look cross. A read-only map gets none."""
+        (design §5), stored and in the map; ``views``: grey panoramas taken half-way out
+        along the arms of its Turn Back and Look cross. A read-only map gets none."""
         if self.store.readonly or settings.max_lookalikes == 0:
             return []
         with self._lock:
             place = self.graph.place(place_id)
             others = {p.id: (PreparedTemplates.of(p.landmarks.templates()),
-                             _background(p)) for p in self.graph.places if p.id != place_id}
+                             _background(p, settings.background_lrp))
+                      for p in self.graph.places if p.id != place_id}
         margin = place.landmarks.margin
         reference = to_grey(self.store.reference_panorama(place_id))
         own_views = [reference, *views]
         found = lookalikes(own_views, PreparedTemplates.of(place.landmarks.templates()),
-                           _background(place), others, settings.lookalike_margin,
+                           _background(place, settings.background_lrp), others,
+                           settings.lookalike_margin,
                            settings.max_lookalikes)
         pairs = []
         for other in found:

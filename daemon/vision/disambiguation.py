@@ -5,8 +5,8 @@ For a pair of places A and B that the lower levels cannot tell apart, A's featur
 template of A's view — position and size from :data:`SIZES` — whose best NCC anywhere in
 B's view is lowest (§6.1). The thesis scored one image and found the feature unreliable
 when the robot stood a little off the reference; here a candidate is also matched in A's
-other views (the Turn Back and Look frames, taken up to the cross's arm from the
-reference) near where it was cut, and the score is its worst match there minus its best
+other views (taken half-way out along the arms of the Turn Back and Look cross) near
+where it was cut, and the score is its worst match there minus its best
 match in B:
 
     score(t) = min_v∈A′ max_near NCC(v, t) − max_v∈B max_anywhere NCC(v, t)
@@ -33,7 +33,7 @@ GRID_STEP = 8  # candidates are cut every GRID_STEP columns and rows
 CANDIDATES_PER_SIZE = 120  # the most textured candidates of each size are scored
 MIN_STD = 8.0  # grey levels: flatter patches match anything (or nothing) by chance
 NEAR_COLS, NEAR_ROWS = 48, 12  # how far a feature may move in its own place's other views
-# (24° and 7°: a patch 1.2 m away seen from the tip of a 0.5 m cross)
+# (24° and 7°: a patch 1 m away seen from 0.25 m off the reference)
 
 
 @dataclass(frozen=True)
@@ -125,17 +125,19 @@ def decide(view: np.ndarray, feature_a: Feature, feature_b: Feature) -> Decision
 
 
 def choose(view: np.ndarray, features: dict[tuple[int, int], Feature]
-           ) -> tuple[int, dict[int, float]]:
+           ) -> tuple[int, dict[int, float], dict[tuple[int, int], float]]:
     """Among several look-alikes: ``features[(x, y)]`` is x's feature against y. Each
     place scores the mean vote of its own features in ``view`` (a place whose features
     are missing here scores below one whose features say nothing, which scores below
     one whose features are seen); the highest wins. For two places this is
-    :func:`decide`. Returns the winner and every place's score."""
+    :func:`decide`. Returns the winner, every place's score and each feature's best
+    NCC in the view (the evidence)."""
+    nccs = {pair: best_ncc(view, feature) for pair, feature in features.items()}
     votes: dict[int, list[float]] = {}
-    for (x, _y), feature in features.items():
-        votes.setdefault(x, []).append(vote(best_ncc(view, feature), feature))
+    for (x, y), feature in features.items():
+        votes.setdefault(x, []).append(vote(nccs[(x, y)], feature))
     scores = {x: float(np.mean(v)) for x, v in votes.items()}
-    return max(scores, key=lambda x: scores[x]), scores
+    return max(scores, key=lambda x: scores[x]), scores, nccs
 
 
 def best_ncc(view: np.ndarray, feature: Feature) -> float:
