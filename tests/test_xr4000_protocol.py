@@ -127,6 +127,10 @@ def test_can_pairs_position_with_the_next_heading_only() -> None:
     d.feed(0x181, can_position(1, 1), timestamp=0.04)
     assert d.feed(0x281, can_heading(0, 10, 0), timestamp=0.061) == [StaMsg(10, 0)]
     assert d.errors["unpaired"] == 3
+    # The next sample in line pairs however late its heading is received (a loaded host).
+    d.feed(0x181, can_position(2, 2), timestamp=0.08)
+    assert d.feed(0x281, can_heading(0, 11, 0), timestamp=0.2)[0] == OdoMsg(11, None, 2, 2, 0)
+    assert d.errors["unpaired"] == 3
 
 
 @pytest.mark.parametrize(("frame", "reason"), [

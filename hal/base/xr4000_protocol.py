@@ -280,10 +280,15 @@ class CanFrameDecoder:
     """CAN frames in, odometry/status/answers out.
 
     The position frame (0x181) carries no sequence number, so it is paired with the heading
-    frame (0x281) that follows it within ``max_pair_gap_s`` (the controller sends both
-    back to back; samples are a period apart). A heading without a fresh position, or a
-    position overtaken by another or gone stale, is counted (``unpaired``) and dropped, so
-    one sample's position is never joined to another's heading. Wrong lengths
+    frame (0x281) that follows it (the controller sends both back to back; CAN keeps their
+    order). When that heading's sequence number is the one after the last heading's, the
+    position arrived inside its sample and pairs whatever the host's receive timestamps
+    say (a loaded host or an slcan adapter read byte by byte spreads them). Only after a
+    lost heading could the position belong to the lost sample; then it must lie within
+    ``max_pair_gap_s`` of the heading (samples are a period apart). A heading without a
+    fresh position, or a position overtaken by another or gone stale, is counted
+    (``unpaired``) and dropped, so one sample's position is never joined to another's
+    heading. Wrong lengths
     (``bad_length``), out-of-range values (``out_of_range``), error frames (``error_frame``),
     remote frames and unknown ids (``unknown``) are counted too."""
 
@@ -291,6 +296,7 @@ class CanFrameDecoder:
         self.ids = ids or CanIds()
         self.max_pair_gap_s = max_pair_gap_s
         self._position: tuple[int, int, float] | None = None
+        self._last_heading_seq: int | None = None
         self.errors: Counter[str] = Counter()
 
     def feed(self, arbitration_id: int, data: bytes, *, timestamp: float = 0.0,
@@ -325,7 +331,10 @@ class CanFrameDecoder:
                 self.errors["out_of_range"] += 1
                 return []
             out: list[Message | CanAnswer] = [StaMsg(seq, flags)]
-            if position is not None and timestamp - position[2] > self.max_pair_gap_s:
+            previous, self._last_heading_seq = self._last_heading_seq, seq
+            next_in_line = previous is not None and (seq - previous) & 0xFFFF == 1
+            if position is not None and not next_in_line \
+                    and timestamp - position[2] > self.max_pair_gap_s:
                 self.errors["unpaired"] += 1  # a stale position: another sample's
                 position = None
             if position is None:
