@@ -23,6 +23,10 @@ from kernel.sensor_settings import MirrorSettings, PanoramaSettings
 from kernel.settings import as_dict, build, read_toml, setting
 
 _ROBOT_NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+# ROS 2 topic names: slash-separated tokens of letters, digits and '_', none starting with
+# a digit (the part of rcl's validation that needs no substitution).
+_TOPIC = re.compile(r"^/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*$")
+_FRAME_ID = re.compile(r"^[A-Za-z_][A-Za-z0-9_/]{0,63}$")
 
 
 @dataclass(frozen=True)
@@ -46,6 +50,23 @@ class ZenohSettings:
     config_file: str = setting("", doc="a zenoh JSON5 configuration read first (access "
                                "control, authentication: config/zenoh-acl.json5); the "
                                "keys above override its mode and endpoints")
+
+
+@dataclass(frozen=True)
+class Ros2Settings:
+    enabled: bool = setting(False, doc="publish the pose for ROS 2 nodes over rmw_zenoh "
+                           "(daemon/service/ros2.py)")
+    domain_id: int = setting(0, ge=0, le=232, doc="ROS_DOMAIN_ID of the ROS 2 system")
+    topic: str = setting("/placecell/pose", doc="the PoseWithCovarianceStamped topic")
+    frame_id: str = setting("map", doc="header.frame_id of the published pose")
+
+    def __post_init__(self) -> None:
+        if not _TOPIC.match(self.topic):
+            raise ValueError(f"ros2.topic {self.topic!r} is not a ROS 2 topic name "
+                             "(e.g. /placecell/pose: letters, digits, '_' between slashes)")
+        if not _FRAME_ID.match(self.frame_id):
+            raise ValueError(f"ros2.frame_id {self.frame_id!r} is not a frame name "
+                             "(letters, digits, '_' or '/', at most 64)")
 
 
 @dataclass(frozen=True)
@@ -83,6 +104,7 @@ class PlacecellConfig:
     odometry: OdometryNoiseSettings = setting(default_factory=OdometryNoiseSettings)
     localisation: LocalisationSettings = setting(default_factory=LocalisationSettings)
     zenoh: ZenohSettings = setting(default_factory=ZenohSettings)
+    ros2: Ros2Settings = setting(default_factory=Ros2Settings)
     map: MapSettings = setting(default_factory=MapSettings)
     service: ServiceSettings = setting(default_factory=ServiceSettings)
     log: LogSettings = setting(default_factory=LogSettings)

@@ -39,6 +39,7 @@ from daemon.service.learn_job import (
 from daemon.service.mapper import Mapper, Seen
 from daemon.service.notify import Notifier
 from daemon.service.pipeline import make_localiser
+from daemon.service.ros2 import Ros2PosePublisher
 from daemon.service.supervisor import Supervisor, describe
 from daemon.store.sqlite_store import MapStore, SavedPose
 from daemon.vision.drawing import draw_landmarks
@@ -68,6 +69,7 @@ class Daemon:
         self._started_ns = time.monotonic_ns()
         self._session: zenoh.Session | None = None
         self._publishers: dict[str, Any] = {}
+        self._ros2: Ros2PosePublisher | None = None
         self._belief: Belief | None = None
         self._belief_received_ns = 0
         self.hal = HalContext(config)
@@ -175,6 +177,9 @@ class Daemon:
             self._publishers[leaf] = s.declare_publisher(zenoh_link.key(self.robot, leaf))
         self._publishers["events"] = zenoh_link.declare_event_publisher(
             s, zenoh_link.key(self.robot, "events"))
+        if self.config.ros2.enabled:  # the pose for ROS 2 nodes (design §11.1)
+            self._ros2 = Ros2PosePublisher(s, self.config.ros2)
+            log.info("ROS 2: publishing %s on %s", self.config.ros2.topic, self._ros2.key)
         # Late joiners (placecellctl status) get the latest status at once by query.
         for leaf, handler in (("status", self._answer_status),
                               ("cmd/learn_place", self._answer_learn),
@@ -430,6 +435,20 @@ class Daemon:
             except Exception as e:  # noqa: BLE001 - zenoh shutting down
                 log.debug("publish %s failed: %s", leaf, e)
 
+    def _publish_ros2(self, belief: Belief, in_map: SE2) -> None:
+        """The tracked pose in the ``map`` frame for ROS 2 (design §11.1): its covariance
+        turned by the place's heading in the map, the stamp on the UNIX clock."""
+        assert self._ros2 is not None and belief.covariance is not None
+        turn = in_map.yaw - belief.pose_in_place[2] if belief.pose_in_place else 0.0
+        c, s = math.cos(turn), math.sin(turn)
+        R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        covariance = R @ np.array(belief.covariance).reshape(3, 3) @ R.T
+        epoch_ns = belief.stamp_ns + time.time_ns() - time.monotonic_ns()
+        try:
+            self._ros2.publish(in_map, covariance, epoch_ns)
+        except Exception as e:  # noqa: BLE001 - zenoh shutting down
+            log.debug("publish ROS 2 pose failed: %s", e)
+
     def publish_event(self, kind: str, **fields: Any) -> None:
         body = {"event": kind, "stamp_ns": time.monotonic_ns(), **fields}
         log.info("event %s", json.dumps(body))
@@ -449,6 +468,9 @@ class Daemon:
             if place is not None:
                 in_map = place.compose(SE2.of(belief.pose_in_place))
         self.publish("pose", zenoh_link.encode("placecell.pose", _pose_body(belief, in_map)))
+        if self._ros2 is not None and in_map is not None and belief.state == "tracking" \
+                and belief.covariance is not None:
+            self._publish_ros2(belief, in_map)
         self.publish("belief", zenoh_link.encode("placecell.belief", body))
         if belief.closed_transition is not None:
             self._store_cycle(belief.closed_transition)
@@ -601,6 +623,8 @@ class Daemon:
         if self._session is not None:
             try:
                 self._token.undeclare()
+                if self._ros2 is not None:
+                    self._ros2.close()
                 self._session.close()
             except Exception as e:  # noqa: BLE001 - best effort at exit
                 log.warning("closing zenoh: %s", e)

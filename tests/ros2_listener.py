@@ -1,0 +1,77 @@
+"""A ROS 2 subscriber's view of the daemon, as rmw_zenoh would have it, in its own process:
+``python -m tests.ros2_listener PORT ROBOT OUT SECONDS``.
+
+It subscribes to every PoseWithCovarianceStamped-shaped key of domain 0 (the type and hash
+segments left open, so the test checks what the daemon put there), to the liveliness
+tokens of the domain (with the ones already declared), and to the daemon's own JSON
+``pose``; each sample becomes one JSON line in OUT. The CDR is decoded by ``rosbags``,
+nothing of the daemon's code is imported.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import threading
+import time
+from typing import Any
+
+import zenoh
+from rosbags.typesys import Stores, get_typestore
+
+from tests.daemon_harness import client_session
+
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+MSG_TYPE = "geometry_msgs/msg/PoseWithCovarianceStamped"
+
+
+def _decode(payload: bytes) -> dict[str, Any]:
+    msg = TYPESTORE.deserialize_cdr(payload, MSG_TYPE)
+    p, q = msg.pose.pose.position, msg.pose.pose.orientation
+    return {"sec": msg.header.stamp.sec, "nanosec": msg.header.stamp.nanosec,
+            "frame_id": msg.header.frame_id, "position": [p.x, p.y, p.z],
+            "orientation": [q.x, q.y, q.z, q.w], "covariance": msg.pose.covariance.tolist()}
+
+
+def main(argv: list[str]) -> int:
+    port, robot, out_path, seconds = int(argv[0]), argv[1], argv[2], float(argv[3])
+    lock = threading.Lock()
+    out = open(out_path, "w")  # noqa: SIM115 - closed below, written from callbacks
+
+    def write(record: dict[str, Any]) -> None:
+        with lock:
+            out.write(json.dumps(record) + "\n")
+            out.flush()
+
+    def on_ros(sample: zenoh.Sample) -> None:
+        attachment = sample.attachment.to_bytes() if sample.attachment is not None else b""
+        payload = sample.payload.to_bytes()
+        write({"kind": "ros", "key": str(sample.key_expr), "attachment": attachment.hex(),
+               "payload_len": len(payload), "payload": payload.hex(),
+               "message": _decode(payload), "received_ns": time.time_ns()})
+
+    def on_token(sample: zenoh.Sample) -> None:
+        write({"kind": "token", "key": str(sample.key_expr),
+               "alive": sample.kind == zenoh.SampleKind.PUT})
+
+    def on_pose(sample: zenoh.Sample) -> None:
+        write({"kind": "pose", "body": json.loads(sample.payload.to_bytes())})
+
+    session = client_session(port)
+    try:
+        subscribers = [
+            session.declare_subscriber("0/placecell/pose/*/*", on_ros),
+            session.liveliness().declare_subscriber("@ros2_lv/0/**", on_token, history=True),
+            session.declare_subscriber(f"placecell/{robot}/pose", on_pose),
+        ]
+        time.sleep(seconds)
+        for s in subscribers:
+            s.undeclare()
+    finally:
+        session.close()
+        out.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

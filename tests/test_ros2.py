@@ -1,0 +1,154 @@
+"""The pose for ROS 2 over rmw_zenoh (design §11.1): the message, its key, attachment and
+liveliness tokens, checked against ``rosbags`` (an independent CDR decoder and type-hash
+computation) and, end to end, from a subscriber in its own process."""
+
+from __future__ import annotations
+
+import math
+import struct
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xxhash
+from rosbags.typesys import Stores, get_typestore
+
+from daemon.config import from_dict
+from daemon.service import ros2
+from kernel.errors import ConfigError
+from kernel.se2 import SE2
+from tests.conftest import OfficeMap
+from tests.daemon_harness import REPO, read_json_lines, running_daemon, wait_for, write_config
+
+JAZZY = get_typestore(Stores.ROS2_JAZZY)
+POSE_TYPE = "geometry_msgs/msg/PoseWithCovarianceStamped"
+
+
+@pytest.mark.parametrize("store", [Stores.ROS2_JAZZY, Stores.ROS2_HUMBLE])
+def test_the_key_carries_the_type_hash_rosbags_computes(store: Stores) -> None:
+    expected = get_typestore(store).hash_rihs01(POSE_TYPE)
+    assert ros2.topic_key(0, "/placecell/pose") == (
+        f"0/placecell/pose/geometry_msgs::msg::dds_::PoseWithCovarianceStamped_/{expected}")
+
+
+def test_cdr_is_the_documented_layout_and_decodes_to_the_values() -> None:
+    cov = np.array([[0.01, 0.002, 0.0], [0.002, 0.02, 0.0], [0.0, 0.0, 0.003]])
+    stamp_ns = 1_764_700_000_123_456_789
+    data = ros2.pose_cdr(SE2(1.5, -2.25, 2.0), cov, stamp_ns, "map")
+    assert len(data) == 364 and data[:4] == b"\x00\x01\x00\x00"
+    sec, nanosec, length = struct.unpack_from("<iII", data, 4)
+    assert (sec, nanosec, length) == (1_764_700_000, 123_456_789, 4)
+    assert data[16:20] == b"map\x00"
+    pose = struct.unpack_from("<7d", data, 20)
+    assert pose == pytest.approx((1.5, -2.25, 0.0, 0.0, 0.0, math.sin(1.0), math.cos(1.0)))
+    msg = JAZZY.deserialize_cdr(data, POSE_TYPE)
+    full = msg.pose.covariance.reshape(6, 6)
+    assert full[np.ix_([0, 1, 5], [0, 1, 5])] == pytest.approx(cov)
+    assert np.count_nonzero(full) == np.count_nonzero(cov)
+    assert msg.header.frame_id == "map" and msg.pose.pose.position.y == -2.25
+
+
+def test_attachment_is_sequence_timestamp_and_gid() -> None:
+    gid = bytes(range(16))
+    data = ros2.attachment(7, 1_764_700_000_000_000_001, gid)
+    assert len(data) == 33
+    assert struct.unpack("<qqB16s", data) == (7, 1_764_700_000_000_000_001, 16, gid)
+
+
+def test_tokens_and_gid_as_rmw_zenoh_writes_them() -> None:
+    zid = "1f2e3d4c5b6a79880f1e2d3c4b5a6978"
+    assert ros2.node_token(3, zid, 0) == f"@ros2_lv/3/{zid}/0/0/NN/%/%/placecell"
+    token = ros2.publisher_token(3, zid, 0, 1, "/robot/pose")
+    assert token == (f"@ros2_lv/3/{zid}/0/1/MP/%/%/placecell/%robot%pose/"
+                     f"{ros2.MANGLED_TYPE}/{ros2.TYPE_HASH}/::,10:,:,:,,")
+    digest = xxhash.xxh3_128_intdigest(token.encode())
+    low, high = digest & (2**64 - 1), digest >> 64
+    assert ros2.gid(token) == struct.pack("<QQ", low, high)
+
+
+@pytest.mark.parametrize(("section", "message"), [
+    ({"topic": "placecell pose"}, "ros2.topic"),
+    ({"topic": "/1pose"}, "ros2.topic"),
+    ({"frame_id": ""}, "ros2.frame_id"),
+    ({"domain_id": 300}, "ros2.domain_id"),
+])
+def test_bad_ros2_settings_are_refused_by_name(section: dict[str, object],
+                                               message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        from_dict({"ros2": section})
+
+
+def _yaw(q: list[float]) -> float:
+    return 2.0 * math.atan2(q[2], q[3])
+
+
+def test_a_ros2_subscriber_receives_the_tracked_pose(tmp_path: Path,
+                                                     office_map: OfficeMap) -> None:
+    """The daemon tracks on a learned map (it localises by itself); a separate process
+    subscribed the rmw_zenoh way decodes what it receives with rosbags."""
+    office_map(tmp_path / "map.db")
+    config, port = write_config(tmp_path, {
+        "robot": {"name": "rosbot"}, "mapping": {"mode": "localisation"},
+        "sim": {"start_pose": [4.75, 10.15, 0.4]}, "ros2": {"enabled": True}})
+    out = tmp_path / "heard.jsonl"
+    with running_daemon(config):
+        listener = subprocess.Popen(
+            [sys.executable, "-m", "tests.ros2_listener", str(port), "rosbot", str(out), "80"],
+            cwd=REPO, stdout=subprocess.DEVNULL, stderr=(tmp_path / "listener.err").open("w"))
+        try:
+            def heard(n: int) -> bool:
+                return out.exists() and sum(r["kind"] == "ros"
+                                            for r in read_json_lines(out)) >= n
+            assert wait_for(lambda: heard(20), 75, 0.5), (
+                read_json_lines(out)[-5:] if out.exists() else "nothing",
+                (tmp_path / "listener.err").read_text())
+        finally:
+            listener.terminate()
+            listener.wait(10)
+    records = read_json_lines(out)
+    samples = [r for r in records if r["kind"] == "ros"]
+    tokens = [r["key"] for r in records if r["kind"] == "token" and r["alive"]]
+    poses = [r["body"] for r in records if r["kind"] == "pose"
+             and r["body"]["state"] == "tracking" and r["body"]["map"] is not None]
+    # The key: domain, topic, the mangled type and the hash rosbags computes for Jazzy.
+    hash_jazzy = JAZZY.hash_rihs01(POSE_TYPE)
+    assert {s["key"] for s in samples} == {
+        f"0/placecell/pose/geometry_msgs::msg::dds_::PoseWithCovarianceStamped_/{hash_jazzy}"}
+    # Liveliness: the node and its publisher, in the session's id.
+    node = [t for t in tokens if t.endswith("/NN/%/%/placecell")]
+    publisher = [t for t in tokens if "/MP/%/%/placecell/%placecell%pose/" in t]
+    assert len(node) == 1 and len(publisher) == 1, tokens
+    zid = node[0].split("/")[2]
+    assert publisher[0] == (f"@ros2_lv/0/{zid}/0/1/MP/%/%/placecell/%placecell%pose/"
+                            f"geometry_msgs::msg::dds_::PoseWithCovarianceStamped_/"
+                            f"{hash_jazzy}/::,10:,:,:,,")
+    # The attachment: a sequence counting up, a source time now, the publisher's GID.
+    unpacked = [struct.unpack("<qqB16s", bytes.fromhex(s["attachment"])) for s in samples]
+    assert all(len(bytes.fromhex(s["attachment"])) == 33 for s in samples)
+    sequence = [u[0] for u in unpacked]
+    assert sequence == list(range(sequence[0], sequence[0] + len(sequence)))
+    digest = xxhash.xxh3_128_intdigest(publisher[0].encode())
+    gid = struct.pack("<QQ", digest & (2**64 - 1), digest >> 64)
+    assert {u[3] for u in unpacked} == {gid} and {u[2] for u in unpacked} == {16}
+    for s, u in zip(samples, unpacked, strict=True):
+        assert abs(u[1] - s["received_ns"]) < 5e9
+        m = s["message"]
+        stamp_ns = m["sec"] * 1_000_000_000 + m["nanosec"]
+        assert abs(stamp_ns - s["received_ns"]) < 5e9  # the frame's time on the UNIX clock
+        assert m["frame_id"] == "map" and s["payload_len"] == 364
+        # The values: the pose the daemon published in the map frame at the same frame.
+        match = [p for p in poses if abs(p["map"]["x"] - m["position"][0]) < 2e-5
+                 and abs(p["map"]["y"] - m["position"][1]) < 2e-5]
+        assert match, (m, poses[-3:])
+        p = match[0]
+        assert math.remainder(_yaw(m["orientation"]) - p["map"]["yaw"], math.tau) == \
+            pytest.approx(0.0, abs=2e-6)
+        cov = np.array(m["covariance"]).reshape(6, 6)
+        place_cov = np.array(p["covariance"]).reshape(3, 3)
+        # Turned into the map frame: same trace of the position block, same yaw variance.
+        assert cov[0, 0] + cov[1, 1] == pytest.approx(place_cov[0, 0] + place_cov[1, 1],
+                                                      rel=1e-4)
+        assert cov[5, 5] == pytest.approx(place_cov[2, 2], rel=1e-4)
+        assert cov[2, 2] == cov[3, 3] == cov[4, 4] == 0.0
