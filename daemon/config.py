@@ -70,6 +70,23 @@ class Ros2Settings:
 
 
 @dataclass(frozen=True)
+class FoxgloveSettings:
+    enabled: bool = setting(False, doc="serve the live view to Foxglove over WebSocket")
+    listen: str = setting("127.0.0.1:8765", doc="host:port of the WebSocket server "
+                          "(loopback unless configured otherwise)")
+
+    def host_port(self) -> tuple[str, int]:
+        host, _, port = self.listen.rpartition(":")
+        return host, int(port)
+
+    def __post_init__(self) -> None:
+        host, sep, port = self.listen.rpartition(":")
+        if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+            raise ValueError(f"foxglove.listen {self.listen!r} must be host:port, "
+                             "e.g. 127.0.0.1:8765")
+
+
+@dataclass(frozen=True)
 class MapSettings:
     path: str = setting("var/placecell.db", doc="SQLite map file")
     resume: bool = setting(True, doc="start from the pose saved at the last stop")
@@ -105,6 +122,7 @@ class PlacecellConfig:
     localisation: LocalisationSettings = setting(default_factory=LocalisationSettings)
     zenoh: ZenohSettings = setting(default_factory=ZenohSettings)
     ros2: Ros2Settings = setting(default_factory=Ros2Settings)
+    foxglove: FoxgloveSettings = setting(default_factory=FoxgloveSettings)
     map: MapSettings = setting(default_factory=MapSettings)
     service: ServiceSettings = setting(default_factory=ServiceSettings)
     log: LogSettings = setting(default_factory=LogSettings)

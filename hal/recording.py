@@ -25,38 +25,13 @@ from mcap.writer import Writer
 from hal.base.base import BaseStatus, Odometry
 from hal.camera.base import Frame
 from kernel.errors import DeviceInitError, DeviceIOError
+from kernel.message_schemas import SCHEMAS
 
 TOPIC_FRAMES = "/camera/image/compressed"
 TOPIC_ODOMETRY = "/base/odometry"
 TOPIC_STATUS = "/base/status"
 TOPIC_GROUND_TRUTH = "/sim/ground_truth"
 
-_TIME = {"type": "object", "properties": {"sec": {"type": "integer"},
-                                          "nsec": {"type": "integer"}}}
-SCHEMAS: dict[str, dict[str, Any]] = {
-    "foxglove.CompressedImage": {
-        "type": "object",
-        "properties": {"timestamp": _TIME, "frame_id": {"type": "string"},
-                       "data": {"type": "string", "contentEncoding": "base64"},
-                       "format": {"type": "string"}, "stamp_ns": {"type": "integer"},
-                       "seq": {"type": "integer"}},
-    },
-    "placecell.Odometry": {
-        "type": "object",
-        "properties": {k: {"type": "number"} for k in ("x", "y", "yaw")}
-        | {"stamp_ns": {"type": "integer"}, "seq": {"type": "integer"}},
-    },
-    "placecell.BaseStatus": {
-        "type": "object",
-        "properties": {"stamp_ns": {"type": "integer"}, "flags": {"type": "integer"}},
-    },
-    "placecell.Pose2D": {
-        "type": "object",
-        "properties": {k: {"type": "number"} for k in ("x", "y", "yaw")}
-        | {"stamp_ns": {"type": "integer"}},
-    },
-    "placecell.Json": {"type": "object"},
-}
 _TOPIC_SCHEMA = {TOPIC_FRAMES: "foxglove.CompressedImage", TOPIC_ODOMETRY: "placecell.Odometry",
                  TOPIC_STATUS: "placecell.BaseStatus",
                  TOPIC_GROUND_TRUTH: "placecell.Pose2D"}
@@ -79,13 +54,14 @@ class Recorder:
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._sequence: dict[str, int] = {}
+        self._topic_schema = dict(_TOPIC_SCHEMA)
         self._format = image_format
         self._jpeg_quality = jpeg_quality
         self._closed = False
 
     def _channel(self, topic: str) -> int:
         if topic not in self._channels:
-            schema = _TOPIC_SCHEMA.get(topic, "placecell.Json")
+            schema = self._topic_schema.get(topic, "placecell.Json")
             if schema not in self._schemas:
                 self._schemas[schema] = self._writer.register_schema(
                     schema, "jsonschema", json.dumps(SCHEMAS[schema]).encode())
@@ -132,6 +108,16 @@ class Recorder:
 
     def write_json(self, topic: str, stamp_ns: int, obj: dict[str, Any]) -> None:
         self._write(topic if topic.startswith("/") else f"/placecell/{topic}", stamp_ns, obj)
+
+    def write_message(self, topic: str, schema: str, stamp_ns: int,
+                      body: dict[str, Any]) -> None:
+        """``body`` on ``topic`` under one of :data:`SCHEMAS` (the live view's topics:
+        a recording opens in the same Foxglove layout)."""
+        if schema not in SCHEMAS:
+            raise ValueError(f"unknown schema {schema!r} for {topic}")
+        with self._lock:
+            self._topic_schema.setdefault(topic, schema)
+        self._write(topic, stamp_ns, body)
 
     def close(self) -> None:
         with self._lock:

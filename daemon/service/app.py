@@ -29,6 +29,7 @@ from daemon.service.components import (
     base_component,
     camera_component,
 )
+from daemon.service.foxglove_view import FoxgloveView
 from daemon.service.learn_job import (
     BaseCommands,
     FrameFeed,
@@ -36,6 +37,7 @@ from daemon.service.learn_job import (
     LearnOutcome,
     job_settings,
 )
+from daemon.service.live_view import TOPICS, LiveScene, Sink
 from daemon.service.mapper import Mapper, Seen
 from daemon.service.notify import Notifier
 from daemon.service.pipeline import make_localiser
@@ -70,6 +72,8 @@ class Daemon:
         self._session: zenoh.Session | None = None
         self._publishers: dict[str, Any] = {}
         self._ros2: Ros2PosePublisher | None = None
+        self._view: FoxgloveView | None = None
+        self._scene: LiveScene | None = None
         self._belief: Belief | None = None
         self._belief_received_ns = 0
         self.hal = HalContext(config)
@@ -435,6 +439,30 @@ class Daemon:
             except Exception as e:  # noqa: BLE001 - zenoh shutting down
                 log.debug("publish %s failed: %s", leaf, e)
 
+    def _open_view(self) -> None:
+        """The live scene's sinks: the Foxglove server when enabled, the recording."""
+        sinks: list[Sink] = []
+        if self.config.foxglove.enabled:
+            self._view = FoxgloveView(self.config.foxglove, self.robot, TOPICS)
+            sinks.append(self._view)
+            log.info("Foxglove live view on ws://%s", self.config.foxglove.listen)
+        if self.recorder is not None:
+            sinks.append(self.recorder)
+        self._scene = LiveScene(sinks) if sinks else None
+
+    def _show(self, belief: Belief, body: dict[str, Any], in_map: SE2 | None) -> None:
+        assert self._scene is not None
+        localiser = self.processing.localiser  # this is its thread: the frame just done
+        tracker = None if localiser is None else localiser.tracker
+        place_in_map = None if tracker is None else self.mapper.map_frame.get(tracker.place.id)
+        try:
+            self._scene.show(belief.stamp_ns, body, in_map, place_in_map,
+                             None if tracker is None else tracker.filter.particles,
+                             None if localiser is None else localiser.panorama,
+                             self.mapper.drawn)
+        except Exception as e:  # noqa: BLE001 - a viewer never stops localisation
+            log.warning("live view: %s", e)
+
     def _publish_ros2(self, belief: Belief, in_map: SE2) -> None:
         """The tracked pose in the ``map`` frame for ROS 2 (design §11.1): its covariance
         turned by the place's heading in the map, the stamp on the UNIX clock."""
@@ -490,8 +518,8 @@ class Daemon:
         except PlacecellError as e:  # the map file refused: say so, keep localising
             log.error("autonomous acquisition: %s", e)
             self._acquire_after = time.monotonic() + 10.0
-        if self.recorder is not None:
-            self.recorder.write_json("belief", belief.stamp_ns, body)
+        if self._scene is not None:
+            self._show(belief, body, in_map)
 
     def _store_cycle(self, transition: Transition) -> None:
         """A cycle closed by local estimates in both places (design §6, §7.1.3)."""
@@ -574,6 +602,7 @@ class Daemon:
 
     def run(self) -> int:
         self._open_zenoh()
+        self._open_view()
         self.supervisor.start()
         ready = False
         period = self.config.service.status_period_s
@@ -620,6 +649,8 @@ class Daemon:
         if self.recorder is not None:
             self.recorder.close()
         self.map.close()
+        if self._view is not None:
+            self._view.close()
         if self._session is not None:
             try:
                 self._token.undeclare()

@@ -200,6 +200,16 @@ class Mapper:
             self.graph.add_transition(transition)
         self.reembed()
 
+    def drawn(self) -> tuple[dict[int, tuple[SE2, str]], list[tuple[int, int]]]:
+        """What a map view draws: the places embedded in the `map` frame with their
+        labels, and each linked pair once."""
+        with self._lock:
+            frame = self.map_frame
+            places = {p.id: (frame[p.id], p.label) for p in self.graph.places if p.id in frame}
+            pairs = sorted({(min(t.from_id, t.to_id), max(t.from_id, t.to_id))
+                            for t in self.graph.transitions})
+        return places, pairs
+
     def reembed(self) -> threading.Thread:
         """Optimise the `map` frame over the map as it is now, on a thread of its own
         (the processing loop closes cycles; a large map takes seconds); a later
