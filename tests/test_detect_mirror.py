@@ -1,9 +1,11 @@
-"""detect-mirror on rendered donuts with noise (issue 3, point 2)."""
+"""detect-mirror on rendered donuts: with noise, with dark things touching the rim, with
+the rim cut by the frame, with a lit ring round the mirror; and what it refuses."""
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import subprocess
 from pathlib import Path
 
@@ -12,7 +14,7 @@ import numpy as np
 import pytest
 
 from daemon.config import load
-from daemon.vision.detect_mirror import MirrorNotFoundError, detect_mirror
+from daemon.vision.detect_mirror import MirrorGeometry, MirrorNotFoundError, detect_mirror
 from hal.sim.render import Renderer
 from hal.sim.world import load_world
 from tests.daemon_harness import REPO, venv_bin
@@ -38,14 +40,98 @@ def _render(spec: str, cx: float, cy: float, r_in: float, r_out: float, noise: f
     return renderer.donut(pose, noise_sigma=noise, rng=np.random.default_rng(seed))
 
 
+def _occlude(img: np.ndarray, cx: float, cy: float, r_out: float, fraction: float,
+             seed: int) -> np.ndarray:
+    """Dark things (a person) and checkerboards seen in the mirror where it meets the rim,
+    ``fraction`` of the rim in 1-3 pieces, each reaching 25-45 % of the way in."""
+    rng = np.random.default_rng(seed)
+    out = img.copy()
+    pieces = int(rng.integers(1, 4))
+    start, span = rng.uniform(0, 2 * math.pi), fraction * 2 * math.pi / pieces
+    yy, xx = np.mgrid[:img.shape[0], :img.shape[1]]
+    board = (((xx // 12) + (yy // 12)) % 2 * 230 + 10).astype(np.uint8)
+    for k in range(pieces):
+        a = np.linspace(start + k * 2 * math.pi / pieces,
+                        start + k * 2 * math.pi / pieces + span, 30)
+        depth = rng.uniform(0.25, 0.45) * r_out
+        rim = [(cx + (r_out - 0.5) * math.cos(t), cy + (r_out - 0.5) * math.sin(t)) for t in a]
+        inner = [(cx + (r_out - depth) * math.cos(t), cy + (r_out - depth) * math.sin(t))
+                 for t in a[::-1]]
+        mask = np.zeros(img.shape[:2], np.uint8)
+        cv2.fillPoly(mask, [np.array(rim + inner, np.int32)], 1)
+        out[mask == 1] = int(rng.integers(5, 40)) if k % 2 == 0 else board[mask == 1, None]
+    return out
+
+
+def _ring(img: np.ndarray, cx: float, cy: float, r_out: float, gap: float, width: float,
+          noise: float, seed: int) -> np.ndarray:
+    """A lit ring (the mirror's mount or housing) ``gap`` px outside the rim."""
+    out = img.copy()
+    cv2.circle(out, (round(cx), round(cy)), round(r_out + gap + width / 2), (220, 220, 220),
+               round(width), lineType=cv2.LINE_AA)
+    noisy = out + np.random.default_rng(seed).normal(0.0, noise, out.shape)
+    return np.clip(noisy, 0, 255).astype(np.uint8)
+
+
+def _shift(img: np.ndarray, dx: int, dy: int) -> np.ndarray:
+    """The camera looking off-centre: the donut moved, the frame cutting it."""
+    return cv2.warpAffine(img, np.float32([[1, 0, dx], [0, 1, dy]]),
+                          (img.shape[1], img.shape[0]), borderValue=(0, 0, 0))
+
+
+def _assert_found(g: MirrorGeometry, cx: float, cy: float, r_in: float, r_out: float
+                  ) -> None:
+    assert abs(g.center_x_px - cx) <= 2.0 and abs(g.center_y_px - cy) <= 2.0, g
+    assert abs(g.r_outer_px - r_out) <= 3.0, g
+    assert g.r_inner_px is not None and abs(g.r_inner_px - r_in) <= 3.0, g
+
+
+@pytest.mark.parametrize(("spec", "cx", "cy", "r_in", "r_out", "noise"), CASES)
+def test_dark_things_on_up_to_a_third_of_the_rim(spec: str, cx: float, cy: float,
+                                                  r_in: float, r_out: float,
+                                                  noise: float) -> None:
+    base = _render(spec, cx, cy, r_in, r_out, noise)
+    for seed, fraction in ((1, 0.2), (2, 0.33), (3, 0.33)):
+        g = detect_mirror(_occlude(base, cx, cy, r_out, fraction, seed))
+        _assert_found(g, cx, cy, r_in, r_out)
+        assert not g.clipped and not g.ring_outside
+
+
+@pytest.mark.parametrize(("spec", "cx", "cy", "r_in", "r_out", "noise"), CASES)
+def test_a_rim_cut_by_the_frame_is_fitted_on_its_visible_arc(
+        spec: str, cx: float, cy: float, r_in: float, r_out: float, noise: float) -> None:
+    base = _render(spec, cx, cy, r_in, r_out, noise, seed=4, turn=True)
+    for dx, dy in ((140, 0), (-60, 70), (0, -90)):
+        g = detect_mirror(_shift(base, dx, dy))
+        _assert_found(g, cx + dx, cy + dy, r_in, r_out)
+        assert g.clipped and g.rim_arc_deg < 340.0, g  # and it says so
+
+
+@pytest.mark.parametrize(("spec", "cx", "cy", "r_in", "r_out", "noise"), CASES)
+def test_a_lit_ring_round_the_mirror_is_not_its_rim(spec: str, cx: float, cy: float,
+                                                    r_in: float, r_out: float,
+                                                    noise: float) -> None:
+    base = _render(spec, cx, cy, r_in, r_out, noise, seed=5)
+    for seed, (gap, width) in enumerate(((4, 8), (8, 16), (5, 30))):
+        g = detect_mirror(_ring(base, cx, cy, r_out, gap, width, noise, seed))
+        _assert_found(g, cx, cy, r_in, r_out)
+        assert g.ring_outside
+
+
+@pytest.mark.parametrize(("dx", "dy"), [(480, 0), (0, 400), (-460, 300)])
+def test_refuses_when_too_little_of_the_rim_is_in_the_frame(dx: int, dy: int) -> None:
+    spec, cx, cy, r_in, r_out, noise = CASES[0]
+    with pytest.raises(MirrorNotFoundError, match="rim is seen on only"):
+        detect_mirror(_shift(_render(spec, cx, cy, r_in, r_out, noise), dx, dy))
+
+
 @pytest.mark.parametrize(("spec", "cx", "cy", "r_in", "r_out", "noise"), CASES)
 def test_recovers_centre_and_radii(spec: str, cx: float, cy: float, r_in: float,
                                    r_out: float, noise: float) -> None:
     for seed, turn in ((0, False), (1, True), (2, False), (3, True)):
         g = detect_mirror(_render(spec, cx, cy, r_in, r_out, noise, seed, turn))
-        assert abs(g.center_x_px - cx) <= 2.0 and abs(g.center_y_px - cy) <= 2.0
-        assert abs(g.r_outer_px - r_out) <= 3.0
-        assert abs(g.r_inner_px - r_in) <= 3.0
+        _assert_found(g, cx, cy, r_in, r_out)
+        assert not g.clipped and not g.ring_outside and g.rim_arc_deg >= 340.0
 
 
 def test_cli_prints_a_mirror_section(tmp_path: Path) -> None:
@@ -59,6 +145,7 @@ def test_cli_prints_a_mirror_section(tmp_path: Path) -> None:
     human = subprocess.run([venv_bin("placecell-sim"), "detect-mirror", str(path)],
                            cwd=REPO, capture_output=True, text=True, timeout=60)
     assert "[mirror]" in human.stdout and "r_inner_px" in human.stdout
+    assert "rim from" in human.stdout and "inner edge from" in human.stdout
 
 
 def test_refuses_images_without_a_mirror(tmp_path: Path) -> None:

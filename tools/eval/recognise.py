@@ -50,6 +50,9 @@ def _read(path: str) -> np.ndarray:
 def _mirror(spec: str, reference: np.ndarray) -> MirrorSettings:
     if spec == "auto":
         g = detect_mirror(reference)
+        if g.r_inner_px is None:
+            raise PlacecellError("--mirror auto: the camera's reflection (inner radius) was "
+                                 "not found; give --mirror CX,CY,R_IN,R_OUT")
         cx, cy, r_in, r_out = g.center_x_px, g.center_y_px, g.r_inner_px, g.r_outer_px
     else:
         try:
