@@ -41,3 +41,16 @@ def test_global_and_kidnap_on_a_small_tour_map(capsys: pytest.CaptureFixture[str
     # Small maps put releases up to 0.5 m beyond the end places, where positioning is
     # slowest; the full experiment's figure is in docs/design.md §9.
     assert k["error_within_0p2_at_10"] >= 0.66 and k["error_m_median_at_10"] <= 0.1, k
+
+
+def test_aliased_runs_with_and_without_the_features(capsys: pytest.CaptureFixture[str],
+                                                    tmp_path: Path) -> None:
+    """Three places 1.5 m apart in the middle of the aliased corridor (the first and last
+    3 m apart: identical doors); each trial twice, the features on and off."""
+    m = _metrics(capsys, "aliased", "--places", "3", "--spacing", "1.5", "--trials", "2",
+                 "--frames", "12")
+    assert m["trials"] == 2 and m["frames"] == 24 and m["places"] == 3
+    assert m["pairs"] >= 1  # the door-apart pair at least is a look-alike
+    for key in ("mlp_accuracy_with", "mlp_accuracy_without"):
+        assert 0.0 <= m[key] <= 1.0
+    assert (m["disambiguation_accuracy"] is None) == (m["ambiguous_frames"] == 0)

@@ -41,6 +41,8 @@ class Disambiguation:
     ncc_place: float  # the chosen place's feature's best NCC in the view
     ncc_other: float  # the other's
     vote: float  # the weighed vote for the chosen place (> 0)
+    elapsed_ms: float = 0.0  # the decision's time (the features matched in the view)
+    pairs: int = 1  # look-alike pairs whose features took part
 
 
 @dataclass(frozen=True)

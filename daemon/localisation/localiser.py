@@ -390,6 +390,8 @@ class Localiser:
         on, its scores may part); then their features decide (``choose``) — overruling
         the lower levels only by ``disambiguation_min_vote``."""
         s = self.settings
+        if not s.disambiguation:
+            return best
         ranked = {c.place_id: c.lead for c in self.search.ranked()}
         top = ranked[best]
         rivals = [p for p, lead in sorted(ranked.items(), key=lambda kv: -kv[1])
@@ -410,7 +412,9 @@ class Localiser:
                 if pair is not None:
                     features[(pair.a_id, pair.b_id)] = pair.a
                     features[(pair.b_id, pair.a_id)] = pair.b
+        started = time.perf_counter()
         winner, scores, nccs = choose(grey, features)
+        elapsed_ms = (time.perf_counter() - started) * 1e3
         if scores[winner] - scores.get(best, 0.0) < s.disambiguation_min_vote:
             winner = best  # the features barely disagree with the lower levels: keep theirs
         runner_up = max((p for p in scores if p != winner
@@ -418,7 +422,8 @@ class Localiser:
                         key=lambda p: scores[p])  # best, at least, is paired with each
         self._told_apart = Disambiguation(winner, runner_up, nccs[(winner, runner_up)],
                                           nccs[(runner_up, winner)],
-                                          scores[winner] - scores[runner_up])
+                                          scores[winner] - scores[runner_up], elapsed_ms,
+                                          len(features) // 2)
         return winner
 
     def _search_step(self, prepare: Callable[[], PreparedPanorama], grey: np.ndarray,

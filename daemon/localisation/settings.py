@@ -150,6 +150,8 @@ class LocalisationSettings:
                                       "disambiguating features are found (design §5)")
     max_lookalikes: int = setting(8, ge=0, le=1000, doc="features are found for at most "
                                   "this many look-alikes of a new place, the closest")
+    disambiguation: bool = setting(True, doc="tell look-alike places apart by their "
+                                   "features (design §5); false: the lower levels alone")
     ambiguity_margin: float = setting(0.1, ge=0.0, le=1.0, doc="the search's top two "
                                       "within this of each other are ambiguous (§9.5)")
     ambiguity_frames: int = setting(3, ge=1, le=100, doc="ambiguous this many frames in a "

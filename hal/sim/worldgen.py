@@ -120,7 +120,7 @@ def _aliased_corridor(rng: np.random.Generator, seed: int) -> World:
              Wall(((length, 0.0), (length, width)), "plain", colour, seed=1),
              Wall(((0.0, width), (0.0, 0.0)), "plain", colour, seed=1)]
     return World(name=f"aliased-corridor-{seed}", walls=tuple(walls), texture_seed=seed,
-                 start_pose=(1.5, width / 2, 0.0),
+                 start_pose=(12.0, width / 2, 0.0),
                  meta={"kind": "aliased-corridor", "seed": seed, "door_spacing_m": spacing})
 
 

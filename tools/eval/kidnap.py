@@ -12,6 +12,8 @@ Metrics (fractions of the trials): ``kidnaps``, ``detected_within_5`` (a loss de
 within 5 frames of the release), ``right_place_within_10`` (the belief's place right at
 the 10th frame: its reference nearest the truth, or within 0.5 m of the nearest),
 ``error_within_0p2_at_10`` (and the position error there at most 0.2 m),
+``right_place_within_15`` (the belief's place right at the 15th frame; None when
+``--after`` is shorter),
 ``mean_active_fraction`` (places recognised per frame over the map's size while lost or
 relocalising), ``error_m_median_at_10``.
 """
@@ -61,7 +63,7 @@ def _trial(r: Run, tour: list[Point], start: int, release: int, yaws: tuple[floa
     c, s = math.cos(yaw), math.sin(yaw)
     r.base.move_relative(c * dx + s * dy, -s * dx + c * dy, 0.0, speed)
     beliefs: list[Belief] = []
-    lost_at, at_10 = None, None
+    lost_at, at_10, right_15 = None, None, None
     active = []
     for k in range(1, after + 1):
         _, belief = r.step()
@@ -70,6 +72,9 @@ def _trial(r: Run, tour: list[Point], start: int, release: int, yaws: tuple[floa
             lost_at = k
         if belief.state in ("lost", "relocalising"):
             active.append(len(belief.scores) / len(r.references))
+        if k == 15:
+            tx, ty, _ = r.robot.true_pose()
+            right_15 = right_place(r.references, belief.place_id, (tx, ty))
         if k == 10:
             tx, ty, _ = r.robot.true_pose()
             error = r.error_m(belief)
@@ -78,6 +83,7 @@ def _trial(r: Run, tour: list[Point], start: int, release: int, yaws: tuple[floa
     r.base.stop()
     assert at_10 is not None
     return {"detected": lost_at is not None and lost_at <= 5, "right": at_10[0],
+            "right_15": right_15,
             "error": at_10[1], "active": active}
 
 
@@ -105,6 +111,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             "right_place_within_10": round(sum(t["right"] for t in trials) / n, 4),
             "error_within_0p2_at_10": round(sum(t["right"] and t["error"] <= 0.2
                                                 for t in trials) / n, 4),
+            "right_place_within_15": round(sum(bool(t["right_15"]) for t in trials) / n, 4)
+            if args.after >= 15 else None,
             "error_m_median_at_10": round(float(np.median(errors)), 4) if errors else None,
             "mean_active_fraction": round(float(np.mean(active)), 4) if active else 0.0,
         }, "config": {"places": args.places, "spacing_m": args.spacing,
