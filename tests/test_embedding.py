@@ -7,6 +7,7 @@ import dataclasses
 import math
 
 import numpy as np
+import pytest
 
 from daemon.mapping.embedding import embed
 from daemon.mapping.graph import TopologicalMap
@@ -66,3 +67,15 @@ def test_places_not_joined_to_the_first_are_left_out() -> None:
                                                         margin=0), id=9))
     assert set(embed(graph)) == set(range(1, 9))
     assert embed(TopologicalMap()) == {}
+
+
+def test_reached_composes_the_first_path_out_to_each_place() -> None:
+    """TopologicalMap.reached: what the Mapper uses to keep neighbours out of look-alikes."""
+    graph = _graph(0.0, close=False)
+    reached = graph.reached(1)
+    assert sorted(reached) == [2, 3, 4, 5, 6, 7, 8]
+    for i, t in enumerate(TRUTH[1:], start=2):
+        expected = TRUTH[0].between(t)
+        assert (reached[i].x, reached[i].y) == (
+            pytest.approx(expected.x, abs=1e-9), pytest.approx(expected.y, abs=1e-9))
+    assert sorted(graph.reached(1, max_places=3)) == [2, 3]

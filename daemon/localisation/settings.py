@@ -148,6 +148,9 @@ class LocalisationSettings:
                                       "new place's views within this of the new place's "
                                       "own lead is its look-alike: the pair's "
                                       "disambiguating features are found (design §5)")
+    lookalike_min_distance_m: float = setting(
+        1.6, ge=0.0, le=100.0, doc="places nearer than this through the map's transitions "
+        "are neighbours, not look-alikes")
     max_lookalikes: int = setting(8, ge=0, le=1000, doc="features are found for at most "
                                   "this many look-alikes of a new place, the closest")
     disambiguation: bool = setting(True, doc="tell look-alike places apart by their "

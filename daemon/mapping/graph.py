@@ -11,6 +11,7 @@ from collections.abc import Iterable
 from daemon.mapping.place import Place
 from daemon.mapping.transition import Transition
 from daemon.vision.disambiguation import PairFeatures
+from kernel.se2 import SE2
 
 
 class TopologicalMap:
@@ -73,6 +74,20 @@ class TopologicalMap:
     def neighbours(self, place_id: int) -> list[Transition]:
         """Transitions out of ``place_id``."""
         return list(self._edges.get(place_id, {}).values())
+
+    def reached(self, start: int, max_places: int = 64) -> dict[int, SE2]:
+        """T_start_p of the places nearest ``start`` by transitions (breadth first, the
+        first path found composed along it), up to ``max_places``; ``start`` excluded."""
+        found = {start: SE2()}
+        queue = [start]
+        while queue and len(found) < max_places:
+            a = queue.pop(0)
+            for b, t in self._edges.get(a, {}).items():
+                if b not in found:
+                    found[b] = found[a].compose(t.T_from_to.mean)
+                    queue.append(b)
+        del found[start]
+        return found
 
     def transition(self, from_id: int, to_id: int) -> Transition | None:
         return self._edges.get(from_id, {}).get(to_id)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import logging
+import math
 import threading
 
 import numpy as np
@@ -169,9 +170,13 @@ class Mapper:
             return []
         with self._lock:
             place = self.graph.place(place_id)
+            # Places this near through the map are neighbours, told apart by the pose
+            # carried between them; look-alikes that matter stand farther off.
+            near = {p for p, T in self.graph.reached(place_id).items()
+                    if math.hypot(T.x, T.y) < settings.lookalike_min_distance_m}
             others = {p.id: (PreparedTemplates.of(p.landmarks.templates()),
                              _background(p, settings.background_lrp))
-                      for p in self.graph.places if p.id != place_id}
+                      for p in self.graph.places if p.id != place_id and p.id not in near}
         margin = place.landmarks.margin
         reference = to_grey(self.store.reference_panorama(place_id))
         own_views = [reference, *views]
