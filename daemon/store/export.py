@@ -3,7 +3,9 @@
 A folder holds ``manifest.json`` (format, schema, geometry checksum), ``places.json``
 (every place with its landmarks: row, column, bearing, depth, covariance, score, and the
 template's bytes in base64 so they come back identical), ``transitions.json`` (both
-directions), and per place ``place-<id>.png`` (the reference panorama with its landmarks
+directions), ``features.json`` (the disambiguating features of look-alike pairs, design
+§5: position, scores and template bytes in base64; an export without it imports with
+none), and per place ``place-<id>.png`` (the reference panorama with its landmarks
 drawn, for people) and ``place-<id>-reference.png`` (the panorama itself, lossless).
 """
 
@@ -21,6 +23,7 @@ import numpy as np
 from daemon.mapping.place import Place
 from daemon.mapping.transition import Transition
 from daemon.store.sqlite_store import SCHEMA_VERSION, MapStore
+from daemon.vision.disambiguation import Feature, PairFeatures
 from daemon.vision.drawing import draw_landmarks
 from daemon.vision.landmarks import TEMPLATE, Landmark, LandmarkSet
 from kernel.errors import MapStoreError
@@ -43,12 +46,14 @@ def export_map(store: MapStore, folder: str | Path) -> int:
         _write_png(out / f"place-{place.id}.png", draw_landmarks(panorama, place.landmarks))
         _write_png(out / f"place-{place.id}-reference.png", panorama)
     transitions = [_transition_json(t) for t in store.transitions()]
+    features = [_pair_json(pair) for pair in store.features()]
     _write_json(out / "places.json", places)
     _write_json(out / "transitions.json", transitions)
+    _write_json(out / "features.json", features)
     _write_json(out / "manifest.json", {
         "format": FORMAT, "schema_version": SCHEMA_VERSION,
         "geometry_checksum": store.meta("geometry_checksum"),
-        "places": len(places), "transitions": len(transitions)})
+        "places": len(places), "transitions": len(transitions), "features": len(features)})
     return len(places)
 
 
@@ -64,9 +69,12 @@ def import_map(folder: str | Path, path: str | Path) -> int:
                             f"{manifest.get('format') if isinstance(manifest, dict) else '?'})")
     places_doc = _read_json(src / "places.json")
     transitions_doc = _read_json(src / "transitions.json")
+    features_doc = _read_json(src / "features.json") if (src / "features.json").exists() \
+        else []
     try:
         places = [_place_from_json(d, src) for d in places_doc]
         transitions = [_transition_from_json(d) for d in transitions_doc]
+        features = [_pair_from_json(d) for d in features_doc]
     except (KeyError, TypeError, ValueError) as e:
         raise MapStoreError(f"{src}: malformed export ({type(e).__name__}: {e})") from e
     tmp = dst.with_name(dst.name + ".importing")
@@ -75,7 +83,7 @@ def import_map(folder: str | Path, path: str | Path) -> int:
     store = MapStore.open(tmp, str(manifest["geometry_checksum"]))
     try:
         with store:
-            store.import_places(places, transitions)
+            store.import_places(places, transitions, features)
         os.replace(tmp, dst)
     except BaseException:
         tmp.unlink(missing_ok=True)
@@ -143,6 +151,33 @@ def _transition_from_json(d: dict[str, Any]) -> Transition:
                       UncertainSE2(SE2(float(d["x"]), float(d["y"]), float(d["yaw"])),
                                    np.array(d["covariance"], dtype=float)),
                       d["source"])
+
+
+def _feature_json(f: Feature) -> dict[str, Any]:
+    return {"col": f.col, "row": f.row, "size": f.size, "own_ncc": f.own_ncc,
+            "other_ncc": f.other_ncc,
+            "template": base64.b64encode(np.ascontiguousarray(f.template, np.uint8).tobytes()
+                                         ).decode("ascii")}
+
+
+def _pair_json(pair: PairFeatures) -> dict[str, Any]:
+    return {"a": pair.a_id, "b": pair.b_id, "feature_a": _feature_json(pair.a),
+            "feature_b": _feature_json(pair.b)}
+
+
+def _feature_from_json(d: dict[str, Any]) -> Feature:
+    size = int(d["size"])
+    raw = base64.b64decode(d["template"], validate=True)
+    if size <= 0 or len(raw) != size * size:
+        raise ValueError(f"a feature of size {size} has {len(raw)} template bytes")
+    return Feature(int(d["col"]), int(d["row"]),
+                   np.frombuffer(raw, np.uint8).reshape(size, size).copy(),
+                   float(d["own_ncc"]), float(d["other_ncc"]))
+
+
+def _pair_from_json(d: dict[str, Any]) -> PairFeatures:
+    return PairFeatures(int(d["a"]), int(d["b"]), _feature_from_json(d["feature_a"]),
+                        _feature_from_json(d["feature_b"]))
 
 
 def _write_png(path: Path, image: np.ndarray) -> None:

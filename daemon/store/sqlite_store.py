@@ -268,15 +268,18 @@ class MapStore:
                     self._put_transition(one_way)
         return dataclasses.replace(place, id=new_id)
 
-    def import_places(self, places: Sequence[Place], transitions: Sequence[Transition]
-                      ) -> None:
-        """Places with their ids and transitions as given (map import), in one transaction."""
+    def import_places(self, places: Sequence[Place], transitions: Sequence[Transition],
+                      features: Sequence[PairFeatures] = ()) -> None:
+        """Places with their ids, transitions and look-alike features as given (map
+        import), in one transaction."""
         self._writable()
         with self._lock, _transaction(self._db):
             for place in places:
                 self._insert_place(place, keep_id=True)
             for t in transitions:
                 self._put_transition(t)
+            for pair in features:
+                self._put_features(pair)
 
     def add_transition(self, transition: Transition) -> None:
         """Store a transition both ways (replacing an earlier one between the two)."""
@@ -318,14 +321,17 @@ class MapStore:
         one transaction."""
         self._writable()
         with self._lock, _transaction(self._db):
-            for place_id, other_id, f in ((pair.a_id, pair.b_id, pair.a),
-                                          (pair.b_id, pair.a_id, pair.b)):
-                self._db.execute(
-                    "INSERT OR REPLACE INTO features(place_id, other_id, col, row, template, "
-                    "own_ncc, other_ncc) VALUES (?, ?, ?, ?, ?, ?, ?)",
-                    (place_id, other_id, f.col, f.row,
-                     np.ascontiguousarray(f.template, dtype=np.uint8).tobytes(),
-                     float(f.own_ncc), float(f.other_ncc)))
+            self._put_features(pair)
+
+    def _put_features(self, pair: PairFeatures) -> None:
+        for place_id, other_id, f in ((pair.a_id, pair.b_id, pair.a),
+                                      (pair.b_id, pair.a_id, pair.b)):
+            self._db.execute(
+                "INSERT OR REPLACE INTO features(place_id, other_id, col, row, template, "
+                "own_ncc, other_ncc) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                (place_id, other_id, f.col, f.row,
+                 np.ascontiguousarray(f.template, dtype=np.uint8).tobytes(),
+                 float(f.own_ncc), float(f.other_ncc)))
 
     def features(self) -> list[PairFeatures]:
         """Every pair's features (each pair once, the lower id first)."""
