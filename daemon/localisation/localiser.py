@@ -132,6 +132,7 @@ class Localiser:
         self._features: dict[frozenset[int], PairFeatures] = {}
         self._ambiguous_frames = 0  # the search's pick ambiguous this many frames in a row
         self._told_apart: Disambiguation | None = None  # in this frame
+        self._undecided: int | None = None  # the search's pick while look-alikes stand tied
         self._frames = 0
         self.mode: Mode = "search"
         self.search = PlaceSearch(self.settings)
@@ -330,6 +331,9 @@ class Localiser:
             found_in = self._search_step(prepare, grey, places, first)
             best = self.search.best(places)
             pick = None if best is None else self._tell_apart(grey, best.place_id, places)
+            # Waiting on look-alikes' features (design §5): the lower levels' pick is the
+            # most likely place meanwhile.
+            self._undecided = best.place_id if best is not None and pick is None else None
             if pick is not None:
                 self._start_in(grey, pick)
             return found_in, None
@@ -451,6 +455,7 @@ class Localiser:
         self.mode, self._mode_frames = "search", 0
         self.search.reset(stamp_ns, rejected)
         self.loss.reset()
+        self._undecided = None
         if not keep_episode or self._episode is None:
             self._episode = (stamp_ns, self._frames)
 
@@ -606,6 +611,12 @@ class Localiser:
             best = self.search.ranked()[:1]
             reason = f"global relocalisation: {done} of {n} places recognised" + (
                 f", most likely {best[0].place_id} (lead {best[0].lead:.3f})" if best else "")
+            tied = self._undecided if self.mode == "search" else None
+            if tied is not None and tied in self._known:
+                reason += "; look-alikes stand tied: their features decide shortly"
+                return Belief(state="relocalising", reason=reason + no_odometry, event=event,
+                              place_id=tied, place_label=self._known[tied].place.label,
+                              **common)  # type: ignore[arg-type]
             return Belief(state="relocalising", reason=reason + no_odometry, event=event,
                           **common)  # type: ignore[arg-type]
         est = tracker.estimate
