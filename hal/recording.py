@@ -106,9 +106,6 @@ class Recorder:
         self._write(TOPIC_GROUND_TRUTH, stamp_ns, {"stamp_ns": stamp_ns, "x": pose[0],
                                                    "y": pose[1], "yaw": pose[2]})
 
-    def write_json(self, topic: str, stamp_ns: int, obj: dict[str, Any]) -> None:
-        self._write(topic if topic.startswith("/") else f"/placecell/{topic}", stamp_ns, obj)
-
     def write_message(self, topic: str, schema: str, stamp_ns: int,
                       body: dict[str, Any]) -> None:
         """``body`` on ``topic`` under one of :data:`SCHEMAS` (the live view's topics:

@@ -463,12 +463,11 @@ class Daemon:
         except Exception as e:  # noqa: BLE001 - a viewer never stops localisation
             log.warning("live view: %s", e)
 
-    def _publish_ros2(self, belief: Belief, in_map: SE2) -> None:
+    def _publish_ros2(self, belief: Belief, place: SE2, in_map: SE2) -> None:
         """The tracked pose in the ``map`` frame for ROS 2 (design §11.1): its covariance
         turned by the place's heading in the map, the stamp on the UNIX clock."""
         assert self._ros2 is not None and belief.covariance is not None
-        turn = in_map.yaw - belief.pose_in_place[2] if belief.pose_in_place else 0.0
-        c, s = math.cos(turn), math.sin(turn)
+        c, s = math.cos(place.yaw), math.sin(place.yaw)
         R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         covariance = R @ np.array(belief.covariance).reshape(3, 3) @ R.T
         epoch_ns = belief.stamp_ns + time.time_ns() - time.monotonic_ns()
@@ -490,15 +489,15 @@ class Daemon:
             self._tracked = SavedPose(belief.place_id, belief.pose_in_place,
                                       np.array(belief.covariance).reshape(3, 3), time.time())
         body = _belief_body(belief)
-        in_map = None
+        in_map = place = None
         if belief.place_id is not None and belief.pose_in_place is not None:
             place = self.mapper.map_frame.get(belief.place_id)
             if place is not None:
                 in_map = place.compose(SE2.of(belief.pose_in_place))
         self.publish("pose", zenoh_link.encode("placecell.pose", _pose_body(belief, in_map)))
-        if self._ros2 is not None and in_map is not None and belief.state == "tracking" \
-                and belief.covariance is not None:
-            self._publish_ros2(belief, in_map)
+        if self._ros2 is not None and place is not None and in_map is not None \
+                and belief.state == "tracking" and belief.covariance is not None:
+            self._publish_ros2(belief, place, in_map)
         self.publish("belief", zenoh_link.encode("placecell.belief", body))
         if belief.closed_transition is not None:
             self._store_cycle(belief.closed_transition)

@@ -39,6 +39,7 @@ MIN_RIM_ARC_DEG = 120.0  # rim points on less of the circle: refused
 MAX_RMS_PX = 2.0
 MIN_INNER_FRACTION = 0.5
 BORDER_PX = 2.0  # rim points this near the image border are the border, not the rim
+RAY_ANGLES = np.radians(np.arange(RAYS) * 360.0 / RAYS)  # of the polar resampling's rows
 
 
 class MirrorNotFoundError(PlacecellError):
@@ -154,14 +155,10 @@ def _polar(grey: np.ndarray, cx: float, cy: float, r_max: float) -> tuple[np.nda
 
 
 def _edges(grey: np.ndarray, cx: float, cy: float, r_rough: float
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Angles, rim radius, inner radius of each ray, and which rays stay in the image."""
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """Rim radius and inner radius on each ray of RAY_ANGLES."""
     polar, scale = _polar(grey, cx, cy, 1.35 * r_rough)
-    angles = np.radians(np.arange(RAYS) * 360.0 / RAYS)
     n_r = polar.shape[1]
-    edge_x = cx + (n_r - 1) * scale * np.cos(angles)
-    edge_y = cy + (n_r - 1) * scale * np.sin(angles)
-    inside = ~_on_border(edge_x, edge_y, grey.shape)  # the ray's far end in the image
     smooth = cv2.GaussianBlur(polar, (1, 5), 0)  # along the angle only
     grad = np.gradient(smooth, axis=1)
     lo = int(0.6 * r_rough / scale)
@@ -182,7 +179,7 @@ def _edges(grey: np.ndarray, cx: float, cy: float, r_rough: float
     departed = np.abs(smooth - level) > max(12.0, 4.0 * spread)
     departed[:, hi:] = True
     inner = np.argmax(departed, axis=1) * scale
-    return angles, outer, inner, inside
+    return outer, inner
 
 
 def _inside_ring(grey: np.ndarray, cx: float, cy: float, r: float
@@ -212,7 +209,7 @@ def _inside_ring(grey: np.ndarray, cx: float, cy: float, r: float
         column = rim - 3 - (start + int(np.argmax(bright)))  # the mirror's last bright one
         near = slice(max(0, column - 2), column + 3)
         radii.append((near.start + int(np.argmin(grad[ray, near]))) * scale)
-        angles.append(np.radians(ray * 360.0 / RAYS))
+        angles.append(RAY_ANGLES[ray])
     if len(radii) < 3:
         return None
     a, rr = np.array(angles), np.array(radii)
@@ -224,8 +221,7 @@ def _inside_ring(grey: np.ndarray, cx: float, cy: float, r: float
     inliers = ransac_circle(x, y)
     ix, iy, ir, _ = fit_circle(x[inliers], y[inliers]) if inliers.sum() >= 3 else (
         cx, cy, r, 0.0)
-    every = np.radians(np.arange(RAYS) * 360.0 / RAYS)
-    visible = int((~_on_border(cx + r * np.cos(every), cy + r * np.sin(every),
+    visible = int((~_on_border(cx + r * np.cos(RAY_ANGLES), cy + r * np.sin(RAY_ANGLES),
                                grey.shape)).sum())
     if inliers.sum() < 0.6 * visible or ir >= r - 2.0 or np.hypot(ix - cx, iy - cy) > 3.0:
         return None
@@ -241,16 +237,16 @@ def detect_mirror(image: np.ndarray) -> MirrorGeometry:
     grey = np.asarray(cv2.GaussianBlur(raw_grey, (5, 5), 0))
     cx, cy, r = _rough(grey)
     for _ in range(2):
-        angles, outer, inner, _ = _edges(grey, cx, cy, r)
-        x, y = cx + outer * np.cos(angles), cy + outer * np.sin(angles)
+        outer, inner = _edges(grey, cx, cy, r)
+        x, y = cx + outer * np.cos(RAY_ANGLES), cy + outer * np.sin(RAY_ANGLES)
         usable = ~_on_border(x, y, grey.shape)  # a fall at the border is the frame's edge
         if usable.sum() < 3:
             raise MirrorNotFoundError("no rim point inside the image")
         ocx, ocy, r, out_rms, fits = _fit(x[usable], y[usable])
         rim = np.flatnonzero(usable)[fits]
-        ix, iy = cx + inner * np.cos(angles), cy + inner * np.sin(angles)
+        ix, iy = cx + inner * np.cos(RAY_ANGLES), cy + inner * np.sin(RAY_ANGLES)
         cx, cy = ocx, ocy
-    rim_angles = angles[rim]
+    rim_angles = RAY_ANGLES[rim]
     ring = _inside_ring(grey, cx, cy, r)
     if ring is not None:  # that was a lit ring round the mirror: the rim is inside it
         rim_angles, x, y = ring
