@@ -142,8 +142,6 @@ class PlaceTracker:
         bearings = column_to_bearing_of_centre(found.cols, self.width)
         weights = ncc_weights(found.scores, self.settings.min_ncc) * kept
         sigma_bearing = self._bearing_sigma(found.scores)
-        if self.settings.consensus_sigma_deg > 0:
-            weights = weights * self._consensus(bearings, weights)
         likelihood = self.model(f.particles, bearings, sigma_bearing, self.geometry)
         f.weigh(combine(likelihood, weights, self.settings.outlier_floor))
         self.estimate = f.estimate()
@@ -173,16 +171,6 @@ class PlaceTracker:
         """Particles ~ N(pose, σ), and the estimate that says so until the next frame."""
         self.filter.initialise(pose, sigma_xy, sigma_yaw)
         self.estimate = Estimate(pose, np.diag([sigma_xy**2, sigma_xy**2, sigma_yaw**2]), 1.0)
-
-    def _consensus(self, bearings: np.ndarray, weights: np.ndarray) -> np.ndarray:
-        """1 for the landmarks the best-supported particle explains tightly, else a tenth:
-        with a tight tolerance a pose that half-explains everything (mis-associated
-        landmarks pulling it) explains nothing well, the true pose most landmarks."""
-        tight = np.full(len(bearings), math.radians(self.settings.consensus_sigma_deg))
-        fits = self.model(self.filter.particles, bearings, tight, self.geometry) > 0.1353
-        support = (fits * (weights > 0)).sum(axis=1)  # m <= 2 sigma_tight
-        best = fits[int(np.argmax(support))]
-        return np.where(best, 1.0, 0.1)
 
     def _bearing_sigma(self, ncc: np.ndarray) -> np.ndarray:
         """A tracked bearing's std: ``bearing_sigma_deg`` at NCC 1, growing as it falls."""

@@ -221,7 +221,14 @@ class Localiser:
         est = tracker.estimate
         if not reliable(est.covariance, tracker.confidence, self.settings):
             return None
-        return tracker.place.id, UncertainSE2(SE2.of(est.pose), est.covariance)
+        # The place's depths were measured over its cross with the base's odometry, so
+        # its whole frame shares the odometry's unknown scale error: a position r from the
+        # reference is off by scale_sigma·r along r, for every landmark alike (the filter,
+        # taking them as independent, cannot see it). Fused with odometry as if
+        # independent of it, a link would otherwise claim more than it knows.
+        r = np.array([est.pose[0], est.pose[1], 0.0])
+        covariance = est.covariance + self.odometry_noise.scale_sigma ** 2 * np.outer(r, r)
+        return tracker.place.id, UncertainSE2(SE2.of(est.pose), covariance)
 
     def add_odometry(self, samples: list[Odometry]) -> None:
         self.odometry.extend(samples)

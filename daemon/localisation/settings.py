@@ -39,14 +39,9 @@ class LocalisationSettings:
                                     doc="per-frame std added to every particle (x, y)")
     diffusion_yaw_rad: float = setting(0.002, ge=0.0, le=0.5,
                                        doc="per-frame std added to every particle (yaw)")
-    bearing_sigma_deg: float = setting(1.5, gt=0.0, le=20.0, doc="std of a tracked bearing "
-                                       "at NCC 1 (the current observation)")
-    consensus_sigma_deg: float = setting(
-        0.0, ge=0.0, le=20.0, doc="consensus step before weighing (0: off): the landmarks "
-        "the particle explaining most of them within 2 x this (degrees) does not explain "
-        "count a tenth this frame. Off by default until measured on every world: 0.5 "
-        "takes 5 mis-associated landmarks from 182 to 38 mm (office 2), 100 to 38 "
-        "(corridor), 219 to 50 (open room), but 97 to 154 on office 1")
+    bearing_sigma_deg: float = setting(0.3, gt=0.0, le=20.0, doc="std of a tracked bearing "
+                                       "at NCC 1 (the current observation; 0.06-0.36° "
+                                       "measured, docs/design.md §7)")
     assumed_depth_m: float = setting(2.5, gt=0.0, le=50.0,
                                      doc="assumed-depth model: every landmark this far")
     assumed_depth_sigma_m: float = setting(1.5, gt=0.0, le=50.0,
