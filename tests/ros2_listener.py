@@ -54,17 +54,24 @@ def main(argv: list[str]) -> int:
         write({"kind": "token", "key": str(sample.key_expr),
                "alive": sample.kind == zenoh.SampleKind.PUT})
 
+    first_pose = threading.Event()
+
     def on_pose(sample: zenoh.Sample) -> None:
         write({"kind": "pose", "body": json.loads(sample.payload.to_bytes())})
+        first_pose.set()
 
     session = client_session(port)
     try:
-        subscribers = [
+        # The JSON pose first: the daemon puts it before the ROS message of the same frame,
+        # so once one has arrived every ROS sample heard has its JSON twin in OUT.
+        subscribers = [session.declare_subscriber(f"placecell/{robot}/pose", on_pose)]
+        started = time.monotonic()
+        first_pose.wait(seconds)
+        subscribers += [
             session.declare_subscriber("0/placecell/pose/*/*", on_ros),
             session.liveliness().declare_subscriber("@ros2_lv/0/**", on_token, history=True),
-            session.declare_subscriber(f"placecell/{robot}/pose", on_pose),
         ]
-        time.sleep(seconds)
+        time.sleep(max(0.0, seconds - (time.monotonic() - started)))
         for s in subscribers:
             s.undeclare()
     finally:
