@@ -163,7 +163,7 @@ def test_the_daemons_pipeline_learns_look_alikes_features_and_uses_them(
         run.robot.kidnap(4.2, 1.1, 0.5)
         run.restart_localiser()
         told, belief = [], None
-        for _ in range(20):
+        for _ in range(40):  # 3 ambiguous frames, and up to 20 waiting for clear features
             belief = run.step()[1]
             told += [belief.disambiguation] if belief.disambiguation is not None else []
             if belief.state == "tracking":

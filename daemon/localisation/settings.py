@@ -155,9 +155,15 @@ class LocalisationSettings:
     ambiguity_frames: int = setting(3, ge=1, le=100, doc="ambiguous this many frames in a "
                                     "row: the pair's features decide (0 features: the "
                                     "lower levels' best)")
-    disambiguation_min_vote: float = setting(0.15, ge=0.0, le=1.0, doc="the features "
+    disambiguation_min_vote: float = setting(0.07, ge=0.0, le=1.0, doc="the features "
                                              "overrule the lower levels' pick only when "
                                              "their place's vote leads its by this")
+    disambiguation_min_evidence: float = setting(
+        0.07, ge=0.0, le=1.0, doc="the features decide only when their top two places' "
+        "votes part by this; less, and the decision waits for a clearer view...")
+    disambiguation_max_wait_frames: int = setting(
+        20, ge=0, le=1000, doc="...for at most this many frames, then keeps the lower "
+        "levels' pick")
 
     def __post_init__(self) -> None:
         if len(self.initial_pose) != 3:

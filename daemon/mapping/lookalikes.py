@@ -1,11 +1,14 @@
 """Look-alike places and their disambiguating features, when a place is learned (design
 §5; thesis chapter 6).
 
-A place already in the map is a *look-alike* of the one being learned when, over the new
-place's views (its reference and views half-way out along the arms of its Turn Back
-and Look cross), the lower
-level recognises it nearly as well as the new place itself: its LRP minus background
-within ``margin`` of the new place's. For each look-alike the pair's features are found
+A place already in the map is a *look-alike* of the one being learned when the lower
+level tells them apart by less than ``margin`` (LRP minus background) either way: over
+the new place's views (its reference and views half-way out along the arms of its Turn
+Back and Look cross) the old place scores nearly as well as the new one, or in the old
+place's reference view the new place scores nearly as well as the old one. Both ways,
+because backgrounds differ from place to place: in the aliased corridor (seed 1) a door
+place learned first stands 0.19 below a plain place in the plain place's views, yet
+level with it in its own (design §5). For each look-alike the pair's features are found
 (daemon/vision/disambiguation.py): the new place's against the other's reference view,
 scored over the new place's views so it survives small moves; the other's against the
 new place's views. Pure: the service's mapper stores what this returns.
@@ -13,26 +16,42 @@ new place's views. Pure: the service's mapper stores what this returns.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from daemon.vision.disambiguation import PairFeatures, find_feature
 from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
 
 
+@dataclass(frozen=True)
+class MappedPlace:
+    """What the look-alike search needs of a place already in the map."""
+
+    templates: PreparedTemplates
+    background: float  # LRP
+    reference: np.ndarray  # grey reference panorama with its wrap margin
+
+
 def lookalikes(views: list[np.ndarray], own: PreparedTemplates, own_background: float,
-               others: dict[int, tuple[PreparedTemplates, float]], margin: float,
-               limit: int) -> list[int]:
-    """The places of ``others`` (id → templates, background LRP) recognised in the grey
-    ``views`` within ``margin`` of the new place (``own``), at most ``limit``, the
+               others: dict[int, MappedPlace], margin: float, limit: int) -> list[int]:
+    """The places of ``others`` that the lower level tells from the new place (``own``,
+    seen in the grey ``views``) by at most ``margin`` either way, at most ``limit``, the
     closest first."""
     if not others:
         return []
     matcher = FastMatcher()
     prepared = [PreparedPanorama.of(v) for v in views]
     ids = list(others)
-    lrps = np.array([matcher.lrps(p, [own] + [others[i][0] for i in ids]) for p in prepared])
-    leads = lrps.mean(axis=0) - np.array([own_background] + [others[i][1] for i in ids])
-    gap = leads[0] - leads[1:]  # how far each other place stands below the new one
+    lrps = np.array([matcher.lrps(p, [own] + [others[i].templates for i in ids])
+                     for p in prepared])
+    leads = lrps.mean(axis=0) - np.array([own_background] + [others[i].background
+                                                             for i in ids])
+    gap = leads[0] - leads[1:]  # how far each old place stands below the new one here
+    for k, i in enumerate(ids):  # and the new one below the old one in the old one's view
+        theirs, mine = matcher.lrps(PreparedPanorama.of(others[i].reference),
+                                    [others[i].templates, own])
+        gap[k] = min(gap[k], (theirs - others[i].background) - (mine - own_background))
     order = np.argsort(gap)
     return [ids[k] for k in order[:limit] if gap[k] <= margin]
 

@@ -19,7 +19,7 @@ import numpy as np
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.embedding import embed
 from daemon.mapping.graph import TopologicalMap
-from daemon.mapping.lookalikes import lookalikes, pair_features
+from daemon.mapping.lookalikes import MappedPlace, lookalikes, pair_features
 from daemon.mapping.odometry_chain import OdometryChain
 from daemon.mapping.place import Place, with_cues
 from daemon.mapping.settings import OdometryNoiseSettings
@@ -174,8 +174,9 @@ class Mapper:
             # carried between them; look-alikes that matter stand farther off.
             near = {p for p, T in self.graph.reached(place_id).items()
                     if math.hypot(T.x, T.y) < settings.lookalike_min_distance_m}
-            others = {p.id: (PreparedTemplates.of(p.landmarks.templates()),
-                             _background(p, settings.background_lrp))
+            others = {p.id: MappedPlace(PreparedTemplates.of(p.landmarks.templates()),
+                                        _background(p, settings.background_lrp),
+                                        to_grey(self.store.reference_panorama(p.id)))
                       for p in self.graph.places if p.id != place_id and p.id not in near}
         margin = place.landmarks.margin
         reference = to_grey(self.store.reference_panorama(place_id))
