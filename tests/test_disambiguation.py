@@ -12,9 +12,11 @@ import cv2
 import numpy as np
 import pytest
 
+from daemon.mapping.lookalikes import own_feature
 from daemon.store.sqlite_store import MapStore
 from daemon.vision.disambiguation import (
     Feature,
+    best_ncc,
     choose,
     decide,
     find_feature,
@@ -78,6 +80,26 @@ def test_a_feature_that_does_not_survive_a_small_move_is_not_chosen() -> None:
     other_view = a.copy()
     feature = find_feature([_wrap(flicker), _wrap(_moved(other_view, rng, 2))], [_wrap(b)], M)
     assert _on(feature, *SIGN), (feature.col, feature.row)
+
+
+def test_the_new_places_feature_is_absent_from_every_look_alike_not_just_one() -> None:
+    """A has a sign and a plant; look-alike B has neither, look-alike C has the sign.
+    Against B alone the sign is chosen, and C matches it perfectly: it would vote for A
+    wherever C is. Against both (design §5) the feature is the plant, which C lacks."""
+    rng = np.random.default_rng(6)
+    a, b = _aliased_pair(rng)  # the sign at SIGN
+    plant = (560, 48, 32)
+    a[48:80, 560:592] = (np.kron(rng.integers(0, 2, (8, 8)), np.ones((4, 4))) * 200 + 30
+                         ).astype(np.uint8)
+    c = b.copy()
+    col, row, side = SIGN
+    c[row:row + side, col:col + side] = a[row:row + side, col:col + side]
+    own = [_wrap(a), _wrap(_moved(a, rng, 3))]
+    against_b = find_feature(own, [_wrap(b)], M)
+    assert _on(against_b, *SIGN) and best_ncc(_wrap(c), against_b) > 0.95
+    feature = own_feature(own, [_wrap(b), _wrap(c)], M)
+    assert _on(feature, *plant), (feature.col, feature.row)
+    assert best_ncc(_wrap(c), feature) < 0.6 and feature.other_ncc < 0.6, feature
 
 
 @pytest.mark.parametrize("shift", [0, 37, -150, 355])

@@ -19,7 +19,7 @@ import numpy as np
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.embedding import embed
 from daemon.mapping.graph import TopologicalMap
-from daemon.mapping.lookalikes import MappedPlace, lookalikes, pair_features
+from daemon.mapping.lookalikes import MappedPlace, lookalikes, own_feature, pair_features
 from daemon.mapping.odometry_chain import OdometryChain
 from daemon.mapping.place import Place, with_cues
 from daemon.mapping.settings import OdometryNoiseSettings
@@ -186,9 +186,11 @@ class Mapper:
                            settings.lookalike_margin,
                            settings.max_lookalikes)
         pairs = []
+        mine = own_feature(own_views, [others[o].reference for o in found], margin) \
+            if found else None
         for other in found:
-            pair = pair_features(place_id, own_views, other,
-                                 to_grey(self.store.reference_panorama(other)), margin)
+            pair = pair_features(place_id, own_views, other, others[other].reference, margin,
+                                 mine)
             with self._lock:
                 self.store.put_features(pair)
                 self.graph.add_features(pair)

@@ -92,9 +92,13 @@ def find_feature(own: list[np.ndarray], other: list[np.ndarray], margin: int) ->
         for col, row in _textured_candidates(reference, size):
             template = np.ascontiguousarray(reference[row:row + size, col:col + size])
             # The wrap margin lets a match straddle the seam.
-            other_ncc = max(float(ncc_map(v, template).max()) for v in other)
+            other_ncc = -1.0
+            for v in other:
+                other_ncc = max(other_ncc, float(ncc_map(v, template).max()))
+                if best is not None and 1.0 - other_ncc <= best.score:
+                    break  # cannot beat the best even if it persists perfectly
             if best is not None and 1.0 - other_ncc <= best.score:
-                continue  # cannot beat the best even if it persists perfectly
+                continue
             own_ncc = min((_near(v, margin, template, col, row) for v in own[1:]),
                           default=1.0)
             candidate = Feature(col, row, template, own_ncc, other_ncc)
