@@ -159,8 +159,9 @@ class LocalisationSettings:
                                              "overrule the lower levels' pick only when "
                                              "their place's vote leads its by this")
     disambiguation_min_evidence: float = setting(
-        0.07, ge=0.0, le=1.0, doc="the features decide only when their top two places' "
-        "votes part by this; less, and the decision waits for a clearer view...")
+        0.07, ge=0.0, le=1.0, doc="the features decide only when the winner's are seen "
+        "(its vote above 0) and its vote leads the next place's by this; else the "
+        "decision waits for a clearer view...")
     disambiguation_max_wait_frames: int = setting(
         20, ge=0, le=1000, doc="...for at most this many frames, then keeps the lower "
         "levels' pick")

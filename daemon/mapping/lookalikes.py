@@ -8,10 +8,11 @@ Back and Look cross) the old place scores nearly as well as the new one, or in t
 place's reference view the new place scores nearly as well as the old one. Both ways,
 because backgrounds differ from place to place: in the aliased corridor (seed 1) a door
 place learned first stands 0.19 below a plain place in the plain place's views, yet
-level with it in its own (design §5). For each look-alike the pair's features are found
-(daemon/vision/disambiguation.py): the new place's against the other's reference view,
-scored over the new place's views so it survives small moves; the other's against the
-new place's views. Pure: the service's mapper stores what this returns.
+level with it in its own (design §5). The pairs' features are found
+(daemon/vision/disambiguation.py): the new place's one feature against every
+look-alike's reference view at once, scored over the new place's views so it survives
+small moves; each look-alike's against the new place's views. Pure: the service's mapper
+stores what this returns.
 """
 
 from __future__ import annotations
@@ -56,15 +57,16 @@ def lookalikes(views: list[np.ndarray], own: PreparedTemplates, own_background: 
     return [ids[k] for k in order[:limit] if gap[k] <= margin]
 
 
-def pair_features(new_id: int, new_views: list[np.ndarray], other_id: int,
-                  other_reference: np.ndarray, margin: int,
-                  new_feature: Feature | None = None) -> PairFeatures:
-    """The features of the new place (views: its reference first) and a look-alike;
-    ``new_feature``: the new place's, found once against all its look-alikes
-    (:func:`own_feature`), else found against this one."""
-    return PairFeatures(new_id, other_id,
-                        new_feature or find_feature(new_views, [other_reference], margin),
-                        find_feature([other_reference], new_views, margin))
+def pair_features(new_id: int, new_views: list[np.ndarray],
+                  references: dict[int, np.ndarray], margin: int) -> list[PairFeatures]:
+    """The features of the new place (views: its reference first) and each look-alike
+    (id → grey reference view): the new place's one feature (:func:`own_feature`), and
+    each look-alike's against the new place's views."""
+    if not references:
+        return []
+    mine = own_feature(new_views, list(references.values()), margin)
+    return [PairFeatures(new_id, other_id, mine, find_feature([reference], new_views, margin))
+            for other_id, reference in references.items()]
 
 
 def own_feature(new_views: list[np.ndarray], references: list[np.ndarray],

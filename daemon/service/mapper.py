@@ -19,7 +19,7 @@ import numpy as np
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.embedding import embed
 from daemon.mapping.graph import TopologicalMap
-from daemon.mapping.lookalikes import MappedPlace, lookalikes, own_feature, pair_features
+from daemon.mapping.lookalikes import MappedPlace, lookalikes, pair_features
 from daemon.mapping.odometry_chain import OdometryChain
 from daemon.mapping.place import Place, with_cues
 from daemon.mapping.settings import OdometryNoiseSettings
@@ -174,10 +174,12 @@ class Mapper:
             # carried between them; look-alikes that matter stand farther off.
             near = {p for p, T in self.graph.reached(place_id).items()
                     if math.hypot(T.x, T.y) < settings.lookalike_min_distance_m}
-            others = {p.id: MappedPlace(PreparedTemplates.of(p.landmarks.templates()),
-                                        _background(p, settings.background_lrp),
-                                        to_grey(self.store.reference_panorama(p.id)))
-                      for p in self.graph.places if p.id != place_id and p.id not in near}
+            candidates = [(p.id, PreparedTemplates.of(p.landmarks.templates()),
+                           _background(p, settings.background_lrp))
+                          for p in self.graph.places if p.id != place_id and p.id not in near]
+        others = {pid: MappedPlace(templates, background,
+                                   to_grey(self.store.reference_panorama(pid)))
+                  for pid, templates, background in candidates}
         margin = place.landmarks.margin
         reference = to_grey(self.store.reference_panorama(place_id))
         own_views = [reference, *views]
@@ -185,18 +187,14 @@ class Mapper:
                            _background(place, settings.background_lrp), others,
                            settings.lookalike_margin,
                            settings.max_lookalikes)
-        pairs = []
-        mine = own_feature(own_views, [others[o].reference for o in found], margin) \
-            if found else None
-        for other in found:
-            pair = pair_features(place_id, own_views, other, others[other].reference, margin,
-                                 mine)
+        pairs = pair_features(place_id, own_views, {o: others[o].reference for o in found},
+                              margin)
+        for pair in pairs:
             with self._lock:
                 self.store.put_features(pair)
                 self.graph.add_features(pair)
-            pairs.append(pair)
             log.info("place %d looks like place %d: features %d px at column %d against "
-                     "%d px at %d", place_id, other, pair.a.size, pair.a.col, pair.b.size,
+                     "%d px at %d", place_id, pair.b_id, pair.a.size, pair.a.col, pair.b.size,
                      pair.b.col)
         return pairs
 

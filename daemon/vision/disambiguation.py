@@ -20,6 +20,7 @@ Views are grey panoramas with their wrap margin; columns and rows are of the cor
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -91,13 +92,16 @@ def find_feature(own: list[np.ndarray], other: list[np.ndarray], margin: int) ->
     for size in SIZES:
         for col, row in _textured_candidates(reference, size):
             template = np.ascontiguousarray(reference[row:row + size, col:col + size])
-            # The wrap margin lets a match straddle the seam.
+            # Matched in the other place's views one by one (the wrap margin lets a match
+            # straddle the seam) until it cannot beat the best even if it persists
+            # perfectly: an other_ncc of at least 1 - best.score.
+            out_at = math.inf if best is None else 1.0 - best.score
             other_ncc = -1.0
             for v in other:
                 other_ncc = max(other_ncc, float(ncc_map(v, template).max()))
-                if best is not None and 1.0 - other_ncc <= best.score:
-                    break  # cannot beat the best even if it persists perfectly
-            if best is not None and 1.0 - other_ncc <= best.score:
+                if other_ncc >= out_at:
+                    break
+            if other_ncc >= out_at:
                 continue
             own_ncc = min((_near(v, margin, template, col, row) for v in own[1:]),
                           default=1.0)
