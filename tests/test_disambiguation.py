@@ -193,6 +193,16 @@ def test_the_daemons_pipeline_learns_look_alikes_features_and_uses_them(
         assert belief is not None and belief.state == "tracking", belief
         assert belief.place_id == first.id
         assert told and told[-1].place_id == first.id, told
+        # carried to the look-alike: the loss is found, and recovery ends in the right one
+        run.robot.kidnap(7.2, 1.1, -0.4)
+        events = []
+        for _ in range(40):
+            belief = run.step()[1]
+            events += [belief.event] if belief.event is not None else []
+            if events and events[-1].kind == "relocalised":
+                break
+        assert [e.kind for e in events] == ["lost", "relocalised"], events
+        assert belief.state == "tracking" and belief.place_id == second.id, belief
     with MapStore.open(tmp_path / "map.db", None) as store:
         (stored,) = store.features()
     mine = pair.a if pair.a_id == stored.a_id else pair.b  # stored lower id first

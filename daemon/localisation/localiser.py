@@ -366,9 +366,9 @@ class Localiser:
             event = LocalisationEvent("lost", current, f"sensor output below "
                                       f"{self.settings.loss_output} for "
                                       f"{self.settings.loss_frames} frames")
-            leader = self.search.leader_over(current, places)
+            leader = self._leader(grey, current, places)
             if leader is not None:
-                self._start_in(grey, leader.place_id)
+                self._start_in(grey, leader)
             else:
                 self._recover(grey, 1)
             return scored, event
@@ -380,20 +380,35 @@ class Localiser:
             return scored, None
         # mode "recover": steps 1 and 2 of §9.3.2
         if found:
-            return scored, self._relocalised(current, RECOVERY_STEPS[self._step], stamp_ns)
-        leader = self.search.leader_over(current, places)
+            # Found in a place with look-alikes is found in one of them: the view of this
+            # place cannot say which, their features do (design §5).
+            told = self._tell_apart(grey, current, places)
+            if told == current:
+                return scored, self._relocalised(current, RECOVERY_STEPS[self._step],
+                                                 stamp_ns)
+            if told is not None:
+                self._start_in(grey, told)
+            return scored, None
+        leader = self._leader(grey, current, places)
         if leader is not None:
-            self._start_in(grey, leader.place_id)
+            self._start_in(grey, leader)
         elif self._mode_frames >= self.settings.recovery_frames:
             if self._step == 1:
                 self._recover(grey, 2)
             else:  # step 3: the most likely place elsewhere, or search on without this one
                 best = self.search.best([p for p in places if p != current])
-                if best is not None and best.place_id != current:
+                if best is not None:
                     self._start_in(grey, best.place_id)
                 else:
                     self._begin_search(stamp_ns, rejected={current}, keep_episode=True)
         return scored, None
+
+    def _leader(self, grey: np.ndarray, current: int, places: list[int]) -> int | None:
+        """The place the search finds clearly ahead of ``current`` (a kidnap: recovery
+        goes global at once), told apart from its look-alikes; None while none is, or
+        while the features have yet to decide."""
+        leader = self.search.leader_over(current, places)
+        return None if leader is None else self._tell_apart(grey, leader.place_id, places)
 
     def _tell_apart(self, grey: np.ndarray, best: int, places: list[int]) -> int | None:
         """The search's pick (design §5, thesis §9.5): ``best`` unless places with
@@ -409,6 +424,8 @@ class Localiser:
         if not s.disambiguation:
             return best
         ranked = {c.place_id: c.lead for c in self.search.ranked()}
+        if best not in ranked:
+            return best  # not recognised in this search yet: nothing to compare it with
         top = ranked[best]
         rivals = [p for p, lead in sorted(ranked.items(), key=lambda kv: -kv[1])
                   if p != best and p in places and top - lead <= s.ambiguity_margin]
@@ -475,6 +492,7 @@ class Localiser:
         self.search.reset(stamp_ns, rejected)
         self.loss.reset()
         self._undecided = None
+        self._ambiguous_frames = 0
         if not keep_episode or self._episode is None:
             self._episode = (stamp_ns, self._frames)
 
@@ -487,6 +505,7 @@ class Localiser:
         self.tracker, self._closure = tracker, None
         self.mode, self._mode_frames, self._confirming = "confirm", 0, "global"
         self.loss.reset()
+        self._ambiguous_frames = 0
 
     def _recover(self, grey: np.ndarray, step: int) -> None:
         """§9.3.2 step 1: the particles around the estimate (σ recovery_local_sigma_m);
@@ -500,6 +519,7 @@ class Localiser:
             self.tracker.start_anywhere(grey, s.recovery_sigma_m)
         self.mode, self._step, self._mode_frames = "recover", step, 0
         self.loss.reset()
+        self._ambiguous_frames = 0
 
     def _relocalised(self, place_id: int, how: str, stamp_ns: int) -> LocalisationEvent:
         began_ns, began_frame = self._episode or (stamp_ns, self._frames)
