@@ -3,11 +3,14 @@ crafted panoramas: a textured floor reaching a known row in every column, a wall
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
-from daemon.vision.floor import ColourModel, FloorGrid, gradient_floor
-from daemon.vision.local_space import local_space_set, match, match_many, profile
+from daemon.vision.floor import ColourModel, FloorGrid, gradient_floor, texture_threshold
+from daemon.vision.local_space import local_space_set, match, match_many, profile, profile_m
+from tools.eval.cli import main as eval_main
 
 H, W, HORIZON = 120, 720, 43
 FLOOR_BGR = (60, 90, 150)  # brownish
@@ -48,12 +51,30 @@ def test_the_colour_model_tells_floor_from_wall_under_any_light() -> None:
 def test_the_gradient_boundary_is_found_and_nothing_above_the_horizon_is_floor() -> None:
     rng = np.random.default_rng(1)
     b = _boundary()
-    grey = _scene(rng, b).mean(axis=2)
-    assert np.array_equal(gradient_floor(grey, HORIZON, 18.0), _truth(b))
+    for gain in (0.5, 1.0, 1.5):  # on the log intensity: the light changes nothing
+        grey = _scene(rng, b, gain).mean(axis=2)
+        assert np.mean(gradient_floor(grey, HORIZON, 0.2) == _truth(b)) > 0.999, gain
     flat = np.full((H, W), 100.0)  # no step below the horizon: no floor (thesis §5.1.2)
-    assert not gradient_floor(flat, HORIZON, 18.0).any()
+    assert not gradient_floor(flat, HORIZON, 0.2).any()
     step = np.where(np.arange(H)[:, None] >= 20, 100.0, 30.0) * np.ones((1, W))
-    assert not gradient_floor(step, HORIZON, 18.0).any()  # a step above the horizon
+    assert not gradient_floor(step, HORIZON, 0.2).any()  # a step above the horizon
+
+
+def test_a_patterned_carpet_is_no_boundary_once_its_texture_is_learned() -> None:
+    """Dark stripes across the carpet (a motif) stop a fixed threshold short; the
+    threshold learned from the floor in front of the robot passes them."""
+    rng = np.random.default_rng(3)
+    b = _boundary()
+    img = _scene(rng, b).astype(float)
+    motif = (np.arange(H) % 8 < 2)[:, None] & _truth(b)  # every 8th row pair 25 % darker
+    img[motif] *= 0.75
+    grey = np.clip(img, 0, 255).astype(np.uint8).mean(axis=2)
+    assert np.mean(gradient_floor(grey, HORIZON, 0.12) == _truth(b)) < 0.95
+    learned = texture_threshold(grey[111:, :])  # the bottom rows: floor everywhere
+    assert 0.12 < learned < 0.4, learned
+    assert np.mean(gradient_floor(grey, HORIZON, learned) == _truth(b)) > 0.99
+    with pytest.raises(ValueError, match="more than 6 rows"):
+        texture_threshold(grey[-5:, :])
 
 
 def test_a_person_walking_past_does_not_rewrite_the_grid_a_lasting_change_does() -> None:
@@ -91,3 +112,33 @@ def test_profiles_match_turned_views_and_tell_other_spots_apart() -> None:
     assert list(local_space_set(here, profiles, float(H), 0.01)) == [1]
     with pytest.raises(ValueError, match="cannot be cut"):
         profile(np.zeros((H, 100), bool))
+
+
+def test_profiles_in_metres_read_the_farthest_floor_row_capped() -> None:
+    rows = np.arange(H)
+    with np.errstate(divide="ignore"):
+        distance = np.where(rows > HORIZON, 100.0 / (rows - HORIZON), np.inf)
+    near = profile_m(_truth(np.full(W, 90)), distance)  # floor up to row 90: 100/47 m
+    assert near == pytest.approx(np.full(16, 100.0 / 47))
+    assert profile_m(_truth(np.full(W, HORIZON + 2)), distance) == pytest.approx(
+        np.full(16, 5.0))  # 50 m seen, capped at 5 m
+    assert not profile_m(np.zeros((H, W), bool), distance).any()  # no floor: 0 m
+    b = _boundary()
+    here, turned = (profile_m(_truth(x), distance) for x in (b, _boundary(shift=2 * 45)))
+    assert match(here, turned, 5.0) == pytest.approx(1.0)
+    assert match(here, near, 5.0) < 0.95
+
+
+def test_the_floor_experiment_on_two_hard_floors(capsys: pytest.CaptureFixture[str]) -> None:
+    """A small ``placecell-eval floor`` (design §4): on a patterned carpet and on glossy
+    tiles, with shadows, in the office, the fused grid beats both methods alone; a
+    person walking past hardly moves the local space profile, a 1 m move does."""
+    assert eval_main(["floor", "--poses", "2", "--floors", "carpet,glossy-tiles",
+                      "--json"]) == 0
+    m = json.loads(capsys.readouterr().out)["metrics"]
+    for after in (1, 5):
+        fused = m[f"mae_fused_{after}"]
+        assert fused < m[f"mae_colour_{after}"] and fused < m[f"mae_gradient_{after}"], m
+    assert m["mae_fused_5"] < 0.15, m
+    assert m["person_match_change_max"] < 0.1 < m["move_1m_match_change_median"], m
+    assert set(m["by_floor"]) == {"carpet", "glossy-tiles"}

@@ -129,3 +129,26 @@ def test_blur_softens_the_donut() -> None:
         return float(cv2.Laplacian(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY), cv2.CV_64F).var())
 
     assert detail(blurred) < 0.5 * detail(sharp)
+
+
+def test_hard_floors_mirror_the_walls_and_darken_beside_them() -> None:
+    """Glossy tiles show the green walls in the floor near their foot; a shadowed floor is
+    darker right beside a wall than in the middle of the room; the mask is the same."""
+    corners = ((HALF_X, -HALF_Y), (HALF_X, HALF_Y), (-HALF_X, HALF_Y), (-HALF_X, -HALF_Y))
+    walls = (Wall(corners, "plain", GREEN, closed=True),)
+    plain = World("plain", walls, floor_texture="tiles")
+    glossy = World("glossy", walls, floor_texture="tiles", floor_gloss=0.4)
+    shadowed = World("shadowed", walls, floor_shadow=0.6)
+    pose = (HALF_X - 1.6, 0.0, 0.0)  # 1.6 m from the wall ahead (column W / 2)
+    views = {w.name: Renderer(w, MIRROR, PANO, (640, 480)) for w in (plain, glossy, shadowed,
+                                                                 World("fine", walls))}
+    mask = views["plain"].floor_mask(pose)
+    assert np.array_equal(mask, views["glossy"].floor_mask(pose))
+    rows = np.flatnonzero(mask[:, PANO.width // 2])
+    foot = rows[:3]  # the floor just short of the wall ahead
+    p, g = (views[k].panorama(pose).astype(int)[foot, PANO.width // 2] for k in ("plain", "glossy"))
+    assert (g[:, 1] - g[:, 2]).mean() > (p[:, 1] - p[:, 2]).mean() + 20  # greener
+    s, f = (views[k].panorama(pose).astype(int)[:, PANO.width // 2].sum(axis=1)
+            for k in ("shadowed", "fine"))
+    by_wall, farther = s[foot].mean() / f[foot].mean(), s[rows[-3:]].mean() / f[rows[-3:]].mean()
+    assert by_wall < 0.7 and farther > by_wall + 0.1, (by_wall, farther)  # 0.2 m out

@@ -78,6 +78,8 @@ def test_shipped_worlds_load_and_render(path: Path) -> None:
     ("[[walls]]\npoints = [[0, 0], [1, 0]]\n[[walls.decorations]]\nkind = 'poster'\n"
      "at_m = -1\nwidth_m = 1\nheight_m = 1\n", "walls[0].decorations[0].at_m"),
     ("wall_height_m = 'tall'\n[[walls]]\npoints = [[0, 0], [1, 0]]\n", "world.wall_height_m"),
+    ("floor_texture = 'lava'\n[[walls]]\npoints = [[0, 0], [1, 0]]\n", "world.floor_texture"),
+    ("floor_gloss = 0.9\n[[walls]]\npoints = [[0, 0], [1, 0]]\n", "world.floor_gloss: 0.9"),
 ])
 def test_bad_world_files_name_the_problem(tmp_path: Path, text: str, message: str) -> None:
     path = tmp_path / "bad.toml"

@@ -61,20 +61,55 @@ class ColourModel:
         return self.histogram[r, g].astype(np.float32) / 255.0
 
 
-def gradient_floor(grey: np.ndarray, horizon_row: int, threshold: float) -> np.ndarray:
-    """(H, W) bool: the pixels below each column's floor boundary — the first vertical
-    step above ``threshold`` found scanning up from the bottom row; a column with none
-    below the horizon has no floor (§5.1.2)."""
-    g = grey.astype(np.float32)
+def vertical_steps(grey: np.ndarray, rows: int = 3, columns: int = 5) -> np.ndarray:
+    """(H, W) float32: at row r, |mean of log intensity over rows r..r + rows − 1 − that
+    over rows r − rows..r − 1|, after averaging ``columns`` columns across (0 where the
+    rows do not fit). On the log intensity a change of light scales nothing."""
+    g = np.asarray(cv2.blur(np.log1p(grey.astype(np.float32)), (columns, 1),
+                            borderType=cv2.BORDER_WRAP))
     h = g.shape[0]
-    step = np.abs(np.diff(g, axis=0))  # step[r - 1] = |I(r) − I(r − 1)|
-    rows = np.arange(1, h)[:, None]
-    strong = (step > threshold) & (rows > horizon_row)
-    # Lowest strong step per column: scanning upwards, the first one met.
-    any_strong = strong.any(axis=0)
-    lowest = h - 1 - np.argmax(strong[::-1], axis=0)  # row r of the step I(r) − I(r − 1)
-    boundary = np.where(any_strong, lowest, h)
-    return np.arange(h)[:, None] >= boundary[None, :]
+    cum = np.vstack([np.zeros((1, g.shape[1]), np.float32), np.cumsum(g, axis=0)])
+    r = np.arange(rows, h - rows + 1)
+    step = np.zeros_like(g)
+    step[r] = np.abs((cum[r + rows] - cum[r]) - (cum[r] - cum[r - rows])) / rows
+    return step
+
+
+def texture_threshold(floor_grey: np.ndarray, rows: int = 3, columns: int = 5) -> float:
+    """A step the floor's own texture does not make: 1.5 x the 99th percentile of the
+    steps within a patch known to be floor (e.g. the one the colour model learns from)."""
+    step = vertical_steps(floor_grey, rows, columns)[rows:floor_grey.shape[0] - rows + 1]
+    if step.size == 0:
+        raise ValueError(f"a floor patch needs more than {2 * rows} rows")
+    return 1.5 * float(np.percentile(step, 99))
+
+
+def gradient_boundary(grey: np.ndarray, horizon_row: int, threshold: float, rows: int = 3,
+                      columns: int = 5) -> np.ndarray:
+    """(W,) each column's floor boundary: the row of the first strong vertical step found
+    scanning up from the bottom, H where there is none below the horizon (§5.1.2).
+
+    A step (:func:`vertical_steps`) counts where it exceeds ``threshold`` and is the
+    largest of its neighbours up and down. The boundary is then the median over
+    ``columns`` neighbouring columns (a carpet's motif or a tile's grout passes one column
+    where the wall's foot runs across all). The thesis compared adjacent pixels; on a
+    patterned carpet the first such step is the pattern's."""
+    step = vertical_steps(grey, rows, columns)
+    h = step.shape[0]
+    peak = (step >= np.roll(step, 1, axis=0)) & (step >= np.roll(step, -1, axis=0))
+    strong = (step > threshold) & peak & (np.arange(h)[:, None] > horizon_row)
+    lowest = h - 1 - np.argmax(strong[::-1], axis=0)  # the boundary: row of the step
+    boundary = np.where(strong.any(axis=0), lowest, h)
+    half = columns // 2
+    return np.median(np.stack([np.roll(boundary, k) for k in range(-half, half + 1)]),
+                     axis=0)
+
+
+def gradient_floor(grey: np.ndarray, horizon_row: int, threshold: float) -> np.ndarray:
+    """(H, W) bool: the pixels below each column's :func:`gradient_boundary`; a column
+    with none has no floor."""
+    boundary = gradient_boundary(grey, horizon_row, threshold)
+    return np.arange(grey.shape[0])[:, None] >= boundary[None, :]
 
 
 @dataclass(frozen=True)
@@ -86,8 +121,8 @@ class FloorSettings:
 
     colour_weight: float = 0.5  # p = 0.5 + w (level − 0.5): how far the colour is trusted
     colour_level: float = 0.1  # level = min(likelihood / this, 1)
-    gradient_p: float = 0.7  # p(floor) below the gradient boundary (1 − it above)
-    gradient_threshold: float = 18.0  # grey levels between vertically adjacent pixels
+    gradient_p: float = 0.75  # p(floor) below the gradient boundary (1 − it above)
+    gradient_threshold: float = 0.25  # log intensity: a 13 % step in brightness
     saturation: float = 8.0  # |log-odds| at most this (thesis §5.1.4)
 
 
@@ -100,8 +135,13 @@ class FloorGrid:
     """The per-pixel log-odds of floor, fused over methods and frames (§5.1.4)."""
 
     def __init__(self, shape: tuple[int, int], horizon_row: int,
-                 settings: FloorSettings | None = None) -> None:
+                 settings: FloorSettings | None = None,
+                 gradient_threshold: float | None = None) -> None:
+        """``gradient_threshold``: learned from the floor (:func:`texture_threshold`);
+        the settings' fixed one without."""
         self.settings = settings or FloorSettings()
+        self.gradient_threshold = (self.settings.gradient_threshold
+                                   if gradient_threshold is None else gradient_threshold)
         self.horizon_row = horizon_row
         self.log_odds = np.zeros(shape, np.float32)
         self._sky = slice(0, horizon_row + 1)  # rows never floor
@@ -111,8 +151,13 @@ class FloorGrid:
         """Each method's p(floor) for this frame ("colour" only with a model)."""
         s = self.settings
         grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
-        below = gradient_floor(grey, self.horizon_row, s.gradient_threshold)
-        out = {"gradient": np.where(below, s.gradient_p, 1.0 - s.gradient_p)}
+        boundary = gradient_boundary(grey, self.horizon_row, self.gradient_threshold)
+        below = np.arange(grey.shape[0])[:, None] >= boundary[None, :]
+        # A column without a boundary says nothing: the floor may be too like the wall
+        # for a step, or not in view.
+        p = np.where(below, s.gradient_p, 1.0 - s.gradient_p)
+        p[:, boundary >= grey.shape[0]] = 0.5
+        out = {"gradient": p}
         if colour is not None:
             # A colour seen on the floor a tenth as often as its commonest one is still a
             # floor colour: the likelihood is read relative to ``colour_level``.

@@ -27,6 +27,25 @@ def profile(floor_mask: np.ndarray, bins: int = BINS) -> np.ndarray:
     return extent.reshape(bins, w // bins).mean(axis=1).astype(np.float64)
 
 
+def profile_m(floor_mask: np.ndarray, distance_of_rows: np.ndarray, cap_m: float = 5.0,
+              bins: int = BINS) -> np.ndarray:
+    """(bins,) free-space extents in metres: per column the floor distance of the
+    farthest floor row counted up from the bottom (0 where the bottom row is no floor),
+    at most ``cap_m``, averaged per bin. ``distance_of_rows`` (H,) is the floor distance
+    each row sees (``Unwarper.floor_distance_of_rows``). Rows crowd towards the horizon,
+    so in rows a metre far off counts for little; in metres, capped, it counts as much as
+    one nearby (design §4: a 1 m move drops the match by more than 0.1 at 0.92 of the
+    poses, in rows at 0.67); compare with ``max_value = cap_m``."""
+    h, w = floor_mask.shape
+    if w % bins:
+        raise ValueError(f"a panorama {w} columns wide cannot be cut into {bins} bins")
+    not_floor = ~floor_mask[::-1]  # bottom row first
+    extent = np.where(not_floor.any(axis=0), np.argmax(not_floor, axis=0), h)
+    farthest = np.clip(h - extent, 0, h - 1)  # the top floor row of each column
+    metres = np.where(extent > 0, np.minimum(distance_of_rows[farthest], cap_m), 0.0)
+    return metres.reshape(bins, w // bins).mean(axis=1).astype(np.float64)
+
+
 def match(h1: np.ndarray, h2: np.ndarray, max_value: float) -> float:
     """c = 1 − min_k SAD(h1, roll(h2, k)) / (max_value · bins) (§5.2.2), in [0, 1]."""
     return float(match_many(h1, h2[None, :], max_value)[0])

@@ -25,6 +25,7 @@ from kernel.sensor_settings import MirrorSettings, PanoramaSettings
 
 PX = textures.PX_PER_M
 SUPERSAMPLE = 2
+SHADOW_PX_PER_M = 50
 CAMERA_BODY_BGR = (35, 35, 35)  # what the mirror shows inside r_inner: the camera itself
 
 
@@ -55,7 +56,9 @@ class Renderer:
         self.image_size = image_size
         self.model = MirrorModel(mirror, panorama)
         self._build_geometry()
-        self._carpet = _pack(textures.carpet(world.floor_colour, world.texture_seed))
+        self._carpet = _pack(textures.floor(world.floor_texture, world.floor_colour,
+                                            world.texture_seed))
+        self._shade = self._shadow_map() if world.floor_shadow > 0 else None
         self._build_donut_map()
 
     # ---------------------------------------------------------------- geometry
@@ -100,6 +103,44 @@ class Renderer:
         self._height = np.asarray(height, float)
         self._offset = np.asarray(offset, float)
         self._low = self._height < w.wall_height_m - 1e-9
+
+    def _shadow_map(self) -> tuple[np.ndarray, float, float]:
+        """The floor's brightness factor on a 2 cm grid over the world (ambient occlusion):
+        1 − floor_shadow · exp(−d / 0.15 m), d the distance to the nearest wall or obstacle
+        foot; with the grid's origin (x0, y0)."""
+        x0, y0, x1, y1 = self.world.bounds()
+        x0, y0 = x0 - 0.5, y0 - 0.5
+        shape = (int((y1 + 0.5 - y0) * SHADOW_PX_PER_M) + 1,
+                 int((x1 + 0.5 - x0) * SHADOW_PX_PER_M) + 1)
+        free = np.full(shape, 255, np.uint8)
+        for a, d in zip(self._p0, self._d, strict=True):
+            pa = (int((a[0] - x0) * SHADOW_PX_PER_M), int((a[1] - y0) * SHADOW_PX_PER_M))
+            pb = (int((a[0] + d[0] - x0) * SHADOW_PX_PER_M),
+                  int((a[1] + d[1] - y0) * SHADOW_PX_PER_M))
+            cv2.line(free, pa, pb, 0, 1)
+        dist_m = cv2.distanceTransform(free, cv2.DIST_L2, 5) / SHADOW_PX_PER_M
+        shade = 1.0 - self.world.floor_shadow * np.exp(-dist_m / 0.15)
+        return shade.astype(np.float32), x0, y0
+
+    def _floor_pixels(self, fx: np.ndarray, fy: np.ndarray, refl: np.ndarray | None
+                      ) -> np.ndarray:
+        """Packed floor colour at world points (fx, fy): the texture, darkened near walls
+        and obstacles, blended with ``refl`` (packed: what the floor mirrors there)."""
+        n = self._carpet.shape[0]
+        px = self._carpet[(fy * PX).astype(np.intp) % n, (fx * PX).astype(np.intp) % n]
+        if self._shade is None and refl is None:
+            return px
+        colour = px.view(np.uint8).reshape(-1, 4)[:, :3].astype(np.float32)
+        if self._shade is not None:
+            shade, x0, y0 = self._shade
+            iy = np.clip(((fy - y0) * SHADOW_PX_PER_M).astype(np.intp), 0, shade.shape[0] - 1)
+            ix = np.clip(((fx - x0) * SHADOW_PX_PER_M).astype(np.intp), 0, shade.shape[1] - 1)
+            colour *= shade[iy, ix][:, None]
+        if refl is not None:
+            g = self.world.floor_gloss
+            mirrored = refl.view(np.uint8).reshape(-1, 4)[:, :3].astype(np.float32)
+            colour = (1.0 - g) * colour + g * mirrored
+        return _pack(np.clip(colour, 0, 255).astype(np.uint8)[None])[0]
 
     def _cast(self, x: float, y: float, angles: np.ndarray, people: Sequence[Person]
               ) -> dict[str, np.ndarray]:
@@ -173,12 +214,20 @@ class Renderer:
         ceil_colour = np.array(self.world.ceiling_colour, np.uint8)
         img[cr, cc, :3] = np.where(seam[:, None], (ceil_colour * 0.8).astype(np.uint8),
                                    ceil_colour)
-        # Floor: tiled carpet texture in world coordinates, seen at d = h / -tan(phi).
+        # Floor: tiled texture in world coordinates, seen at d = h / -tan(phi); a glossy
+        # floor mirrors the full wall, seen at height -z (the camera's image below the
+        # floor), or the ceiling above it.
         fr, fc = np.nonzero(floor)
         d = h / -tan_phi[fr, 0]
-        n = self._carpet.shape[0]
-        packed[fr, fc] = self._carpet[((y + d * sin_a[fc]) * PX).astype(np.intp) % n,
-                                   ((x + d * cos_a[fc]) * PX).astype(np.intp) % n]
+        refl = None
+        if self.world.floor_gloss > 0:
+            z_ref = -z_full[fr, fc]
+            refl = np.full(len(fr), _pack(ceil_colour[None, None])[0, 0], np.uint32)
+            on_wall = np.nonzero(z_ref <= wall_h)[0]
+            cols = fc[on_wall]
+            refl[on_wall] = self._wall_pixels(hit["i_full"][cols], hit["s_full"][cols],
+                                              z_ref[on_wall])
+        packed[fr, fc] = self._floor_pixels(x + d * cos_a[fc], y + d * sin_a[fc], refl)
         # Full-height walls.
         wr, wc = np.nonzero(wall)
         packed[wr, wc] = self._wall_pixels(hit["i_full"][wc], hit["s_full"][wc], z_full[wr, wc])

@@ -12,6 +12,7 @@ PX_PER_M = 100
 
 WALL_KINDS = ("plain", "noise", "stripes", "bricks")
 DECORATION_KINDS = ("poster", "door", "window", "cabinet", "marker")
+FLOOR_KINDS = ("fine", "carpet", "tiles")
 
 
 def _bgr(colour: np.ndarray) -> tuple[int, int, int]:
@@ -105,8 +106,37 @@ def decoration(kind: str, width_px: int, height_px: int, seed: int) -> np.ndarra
     raise ValueError(f"unknown decoration {kind!r} (known: {', '.join(DECORATION_KINDS)})")
 
 
-def carpet(colour: tuple[int, int, int], seed: int, size_px: int = 256) -> np.ndarray:
-    """A tileable fine floor texture around ``colour``."""
+def floor(kind: str, colour: tuple[int, int, int], seed: int) -> np.ndarray:
+    """A tileable floor texture of ``kind`` around ``colour`` (BGR), 2.56 m (``fine``) or
+    3 m square:
+
+    - ``fine``: a fine grain (σ 6 grey levels), nearly one flat colour;
+    - ``carpet``: a patterned carpet — a woven diamond motif 0.15 m across, blotches of
+      wear 0.1-0.3 m across and the grain;
+    - ``tiles``: 0.3 m square tiles of slightly differing tone with 1 cm dark grout.
+    """
     rng = _rng(seed, 3)
+    size_px = 256 if kind == "fine" else 300
+    base = np.array(colour, float)
     fine = rng.normal(0.0, 6.0, (size_px, size_px, 1))
-    return np.clip(np.array(colour, float) + fine, 0, 255).astype(np.uint8)
+    if kind == "fine":
+        return np.clip(base + fine, 0, 255).astype(np.uint8)
+    if kind == "carpet":
+        period = size_px // 20  # 15 cm at 100 px/m: the motif repeats across the tile
+        u = np.arange(size_px) % period / period - 0.5
+        diamond = (np.abs(u)[:, None] + np.abs(u)[None, :] < 0.3).astype(float)
+        small = rng.normal(0.0, 1.0, (size_px // 15, size_px // 15))
+        blotch = cv2.resize(np.vstack([np.hstack([small, small])] * 2),
+                            (2 * size_px, 2 * size_px), interpolation=cv2.INTER_CUBIC)
+        blotch = blotch[size_px // 2:size_px // 2 + size_px, size_px // 2:size_px // 2 + size_px]
+        tone = 1.0 + 0.12 * blotch[..., None] - 0.22 * diamond[..., None]
+        return np.clip(base * tone + fine, 0, 255).astype(np.uint8)
+    if kind == "tiles":
+        tile = size_px // 10  # 0.3 m at 100 px/m
+        tones = rng.uniform(0.9, 1.1, (size_px // tile, size_px // tile))
+        img = base * np.kron(tones, np.ones((tile, tile)))[..., None] + 0.5 * fine
+        grout = (np.arange(size_px) % tile) == 0
+        img[grout, :] = base * 0.45
+        img[:, grout] = base * 0.45
+        return np.clip(img, 0, 255).astype(np.uint8)
+    raise ValueError(f"unknown floor texture {kind!r} (known: {', '.join(FLOOR_KINDS)})")

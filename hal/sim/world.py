@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from hal.sim.textures import DECORATION_KINDS, WALL_KINDS
+from hal.sim.textures import DECORATION_KINDS, FLOOR_KINDS, WALL_KINDS
 from kernel.errors import ConfigError
 from kernel.settings import read_toml
 
@@ -55,6 +55,10 @@ class World:
     walls: tuple[Wall, ...]
     wall_height_m: float = 2.5
     floor_colour: Colour = (60, 80, 110)
+    floor_texture: str = "fine"  # one of textures.FLOOR_KINDS
+    floor_gloss: float = 0.0  # the share of a floor pixel that mirrors the walls, [0, 0.6]
+    floor_shadow: float = 0.0  # how much darker the floor is right beside walls and
+    #                            obstacles, [0, 0.8] (ambient occlusion, 0.15 m falloff)
     ceiling_colour: Colour = (225, 225, 225)
     texture_seed: int = 0
     start_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -83,8 +87,8 @@ def load_world(spec: str) -> World:
         raise ConfigError(f"world {path}: {e}") from e
 
 
-_WORLD_KEYS = {"name", "wall_height_m", "floor_colour", "ceiling_colour", "texture_seed",
-               "start_pose", "walls", "meta"}
+_WORLD_KEYS = {"name", "wall_height_m", "floor_colour", "floor_texture", "floor_gloss",
+               "floor_shadow", "ceiling_colour", "texture_seed", "start_pose", "walls", "meta"}
 _WALL_KEYS = {"points", "texture", "colour", "closed", "height_m", "decorations", "seed"}
 _DECO_KEYS = {"kind", "at_m", "width_m", "bottom_m", "height_m", "seed"}
 
@@ -103,12 +107,22 @@ def _colour(value: Any, where: str) -> Colour:
     return (value[0], value[1], value[2])
 
 
-def _number(value: Any, where: str, minimum: float | None = None) -> float:
+def _number(value: Any, where: str, minimum: float | None = None,
+            maximum: float | None = None) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise ConfigError(f"{where}: expected a number, got {value!r}")
     if minimum is not None and value < minimum:
         raise ConfigError(f"{where}: {value} is out of range (must be >= {minimum})")
+    if maximum is not None and value > maximum:
+        raise ConfigError(f"{where}: {value} is out of range (must be <= {maximum})")
     return float(value)
+
+
+def _floor_texture(value: Any) -> str:
+    if value not in FLOOR_KINDS:
+        raise ConfigError(f"world.floor_texture: {value!r} is not one of "
+                          f"{', '.join(FLOOR_KINDS)}")
+    return str(value)
 
 
 def world_from_dict(data: dict[str, Any]) -> World:
@@ -163,6 +177,9 @@ def world_from_dict(data: dict[str, Any]) -> World:
         name=str(data.get("name", "world")), walls=tuple(walls),
         wall_height_m=_number(data.get("wall_height_m", 2.5), "world.wall_height_m", 0.5),
         floor_colour=_colour(data.get("floor_colour", [60, 80, 110]), "world.floor_colour"),
+        floor_texture=_floor_texture(data.get("floor_texture", "fine")),
+        floor_gloss=_number(data.get("floor_gloss", 0.0), "world.floor_gloss", 0.0, 0.6),
+        floor_shadow=_number(data.get("floor_shadow", 0.0), "world.floor_shadow", 0.0, 0.8),
         ceiling_colour=_colour(data.get("ceiling_colour", [225, 225, 225]),
                                "world.ceiling_colour"),
         texture_seed=int(data.get("texture_seed", 0)),
@@ -174,6 +191,8 @@ def world_from_dict(data: dict[str, Any]) -> World:
 def world_to_toml(world: World) -> str:
     out = [f'name = "{world.name}"', f"wall_height_m = {world.wall_height_m}",
            f"floor_colour = {list(world.floor_colour)}",
+           f'floor_texture = "{world.floor_texture}"', f"floor_gloss = {world.floor_gloss}",
+           f"floor_shadow = {world.floor_shadow}",
            f"ceiling_colour = {list(world.ceiling_colour)}",
            f"texture_seed = {world.texture_seed}", f"start_pose = {list(world.start_pose)}"]
     if world.meta:

@@ -38,6 +38,8 @@ EXPERIMENTS: dict[str, tuple[str, str, str]] = {
                    "global tour: inclusion of the right place and the set's size (design §9)"),
     "kidnap": ("tools.eval.kidnap", "office", "the kidnapped robot: loss detected, right "
                "place, error, over many random kidnaps (design §9, thesis §9.6)"),
+    "floor": ("tools.eval.floor", "office", "floor detection against the simulator's floor "
+              "masks on hard floors, and local space profiles (design §4)"),
     "aliased": ("tools.eval.aliased", "aliased-corridor", "look-alike places told apart "
                 "by their features, against the lower levels alone (design §5)"),
     "mapping": ("tools.eval.mapping", "open-room", "places learned on the robot's own along "
