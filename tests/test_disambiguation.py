@@ -179,6 +179,11 @@ def test_the_daemons_pipeline_learns_look_alikes_features_and_uses_them(
         for _ in run.drive(3.0, 0.0, 0.0, 0.4):
             pass
         second = run.learn("second")
+        # local space (design §4): the floor learned from the frames driven, the place
+        # given its reference panorama's profile (the first was learned before any frame)
+        assert first.local_space is None
+        assert second.local_space is not None and second.local_space.shape == (16,)
+        assert second.local_space.min() >= 0.0 and second.local_space.max() <= 5.0
         (pair,) = run.mapper.graph.features
         assert {pair.a_id, pair.b_id} == {first.id, second.id}
         assert pair.a.score > 0.05 and pair.b.score > 0.05, (pair.a.score, pair.b.score)

@@ -91,3 +91,18 @@ def test_with_a_cue_the_active_set_is_searched_best_first_and_decides() -> None:
                         for p in search.to_score(PLACES, first=(3,))])
     assert search.covered(PLACES) and not all(p in search.scores for p in PLACES)
     assert search.best(PLACES).place_id == 21  # type: ignore[union-attr]
+
+
+def test_the_local_space_set_narrows_the_cue_set_but_keeps_places_without_a_profile(
+        ) -> None:
+    """Thesis §9.4.1 (design §4): of the cue's places only those whose local space
+    matches within the margin of the best stay; one with no profile is not ruled out, and
+    the current place stays whatever its match."""
+    search = PlaceSearch(LocalisationSettings(cue_margin=0.05, local_space_margin=0.075))
+    search.reset(0)
+    cue = {p: 0.9 - 0.01 * abs(p - 20) for p in PLACES}  # 15..25 within the margin
+    local = {p: 0.95 - 0.02 * abs(p - 18) for p in PLACES if p != 24}  # 15..21 within
+    search.set_cue(cue, always=(3,), local=local)
+    assert search.active == set(range(15, 22)) | {24, 3}
+    search.set_cue(cue, always=(3,), local={})  # no profile at all: the cue alone
+    assert search.active == set(range(15, 26)) | {3}

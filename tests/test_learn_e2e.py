@@ -236,6 +236,12 @@ def test_learn_two_places_then_track_from_one_to_the_other(tmp_path: Path) -> No
         places = _ctl(config, "places", "--json")
         listed = check(json.loads(places.stdout))["places"]
         assert [p["label"] for p in listed] == ["dock", "door"]
+    with MapStore.open(tmp_path / "map.db", None, readonly=True) as store:
+        # design §4: the floor learned from the first frame is kept with the map, and
+        # each place learned carries its local space profile
+        assert store.floor() is not None
+        assert all(p.local_space is not None and p.local_space.shape == (16,)
+                   for p in store.load().places)
     references = {dock["place"]["id"]: truth.at(dock["place"]["reference_stamp_ns"]),
                   door["place"]["id"]: truth.at(door["place"]["reference_stamp_ns"])}
     _track_dock_to_door(tmp_path, references, dock["place"]["id"], door["place"]["id"])

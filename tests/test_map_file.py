@@ -21,6 +21,7 @@ from daemon.store.export import export_map, import_map
 from daemon.store.sqlite_store import SCHEMA_VERSION, MapStore, SavedPose
 from daemon.vision.disambiguation import Feature, PairFeatures
 from daemon.vision.drawing import LANDMARK_COLOUR
+from daemon.vision.floor import ColourModel, FloorModel
 from kernel.errors import MapStoreError
 from kernel.se2 import SE2, UncertainSE2
 from tests.map_fixtures import synthetic_place, write_places_until_killed
@@ -179,6 +180,7 @@ def test_version_2_map_keeps_its_places_and_gains_background_estimates(tmp_path:
     db.execute("ALTER TABLE places DROP COLUMN signature")
     db.execute("DROP TABLE resume")
     db.execute("DROP TABLE features")
+    db.execute("DROP TABLE floor")
     db.execute("UPDATE meta SET value = '2' WHERE key = 'schema_version'")
     db.commit()
     db.close()
@@ -196,6 +198,7 @@ def test_version_2_map_keeps_its_places_and_gains_background_estimates(tmp_path:
                    for p in store.load().places)
         assert store.saved_pose() is None  # v4's resume table, empty
         assert store.features() == []  # v5's features table, empty
+        assert store.floor() is None  # v6's floor table, empty
 
 
 def test_the_saved_pose_survives_a_reopen_and_bad_ones_are_refused(tmp_path: Path) -> None:
@@ -240,9 +243,11 @@ def test_export_then_import_gives_the_same_map(tmp_path: Path) -> None:
     pair = PairFeatures(1, 2, Feature(10, 4, rng.integers(0, 255, (24, 24), np.uint8), 0.9,
                                       0.4),
                         Feature(300, 12, rng.integers(0, 255, (16, 16), np.uint8), 0.8, 0.5))
+    floor = FloorModel(ColourModel(rng.integers(0, 256, (256, 256)).astype(np.uint8)), 0.37)
     with _two_places(tmp_path / "map.db") as store:
         store.set_background(2, 0.68)
         store.put_features(pair)
+        store.save_floor(floor, 100.0)
         assert export_map(store, tmp_path / "out") == 2
         original = store.load()
         panoramas = [store.reference_panorama(p.id) for p in original.places]
@@ -260,6 +265,8 @@ def test_export_then_import_gives_the_same_map(tmp_path: Path) -> None:
             assert np.array_equal(la.covariance, lb.covariance)
     assert {(t.from_id, t.to_id, t.T_from_to.mean) for t in original.transitions} == {
         (t.from_id, t.to_id, t.T_from_to.mean) for t in again.transitions}
+    assert again.floor is not None and again.floor.gradient_threshold == 0.37
+    assert again.floor.colour.histogram.tobytes() == floor.colour.histogram.tobytes()
     (kept,) = again.features  # the look-alikes' features come back byte for byte
     for f, g in ((pair.a, kept.a), (pair.b, kept.b)):
         assert (f.col, f.row, f.own_ncc, f.other_ncc) == (g.col, g.row, g.own_ncc, g.other_ncc)
@@ -370,6 +377,7 @@ def test_version_4_map_gains_the_features_table_and_keeps_the_rest(tmp_path: Pat
         store.save_pose(SavedPose(2, (0.1, 0.2, -0.3), cov, 200.0))
     db = sqlite3.connect(path)
     db.execute("DROP TABLE features")
+    db.execute("DROP TABLE floor")
     db.execute("UPDATE meta SET value = '4' WHERE key = 'schema_version'")
     db.commit()
     db.close()
@@ -377,7 +385,7 @@ def test_version_4_map_gains_the_features_table_and_keeps_the_rest(tmp_path: Pat
     fa = Feature(40, 8, rng.integers(0, 256, (24, 24)).astype(np.uint8), 0.95, 0.31)
     fb = Feature(600, 16, rng.integers(0, 256, (16, 16)).astype(np.uint8), 0.9, 0.42)
     with MapStore.open(path, GEOMETRY) as store:
-        assert store.meta("schema_version") == str(SCHEMA_VERSION) == "5"
+        assert store.meta("schema_version") == str(SCHEMA_VERSION) == "6"
         assert [p.label for p in store.load().places] == ["dock", "door"]
         assert store.transition_count() == 2 and store.saved_pose() is not None
         assert store.features() == []
@@ -387,3 +395,35 @@ def test_version_4_map_gains_the_features_table_and_keeps_the_rest(tmp_path: Pat
     assert (pair.a_id, pair.b_id) == (1, 2)
     assert np.array_equal(pair.a.template, fa.template) and pair.a.size == 24
     assert (pair.b.col, pair.b.row, pair.b.own_ncc, pair.b.other_ncc) == (600, 16, 0.9, 0.42)
+
+
+def test_the_floor_model_is_kept_with_the_map_and_a_damaged_one_named(tmp_path: Path
+                                                                       ) -> None:
+    """Schema 6 (design §4): one floor model per map, replaced when learned again; a
+    version 5 file gains the empty table; a damaged histogram is named, not used."""
+    path = tmp_path / "v5.db"
+    _two_places(path).close()
+    db = sqlite3.connect(path)
+    db.execute("DROP TABLE floor")
+    db.execute("UPDATE meta SET value = '5' WHERE key = 'schema_version'")
+    db.commit()
+    db.close()
+    histogram = np.zeros((256, 256), np.uint8)
+    histogram[80, 90] = 255
+    with MapStore.open(path, GEOMETRY) as store:
+        assert store.meta("schema_version") == "6" and store.floor() is None
+        store.save_floor(FloorModel(ColourModel(histogram), 0.2), 10.0)
+        store.save_floor(FloorModel(ColourModel(histogram), 0.3), 20.0)
+    with MapStore.open(path, GEOMETRY) as store:
+        floor = store.load().floor
+        assert floor is not None and floor.gradient_threshold == 0.3
+        assert np.array_equal(floor.colour.histogram, histogram)
+    db = sqlite3.connect(path)
+    db.execute("UPDATE floor SET histogram = ?", (b"short",))
+    db.commit()
+    db.close()
+    with MapStore.open(path, GEOMETRY) as store, pytest.raises(
+            MapStoreError, match="floor model is damaged"):
+        store.floor()
+    with pytest.raises(ValueError, match="gradient threshold is positive"):
+        FloorModel(ColourModel(histogram), 0.0)

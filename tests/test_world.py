@@ -94,6 +94,11 @@ def test_bad_specs() -> None:
         load_world("generate:castle:1")
     with pytest.raises(ConfigError, match="generate:<kind>:<seed>"):
         load_world("generate:office")
+    with pytest.raises(ConfigError, match="unknown floor 'lava'"):
+        load_world("generate:office:1:lava")
+    carpeted = load_world("generate:office:1:carpet")
+    assert carpeted.floor_texture == "carpet" and carpeted.walls == load_world(
+        "generate:office:1").walls
     with pytest.raises(ConfigError, match="cannot read world"):
         load_world("/nonexistent/world.toml")
 

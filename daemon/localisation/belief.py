@@ -7,6 +7,7 @@ from typing import Literal
 
 from daemon.mapping.acquisition import AcquisitionDecision
 from daemon.mapping.transition import Transition
+from daemon.vision.floor import FloorModel
 
 BeliefState = Literal["uninitialised", "tracking", "lost", "relocalising"]
 
@@ -68,3 +69,4 @@ class Belief:
     backgrounds: tuple[tuple[int, float], ...] = ()  # (place, background LRP) measured now
     event: LocalisationEvent | None = None  # a loss or a relocalisation in this frame
     disambiguation: Disambiguation | None = None  # look-alikes told apart in this frame
+    floor_learned: FloorModel | None = None  # the floor learned from this frame (design §4)

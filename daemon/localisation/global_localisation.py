@@ -52,17 +52,25 @@ class PlaceSearch:
         self.started_ns = stamp_ns
         self.rejected = set(rejected or ())
 
-    def set_cue(self, cue: dict[int, float], always: tuple[int, ...] = ()) -> None:
+    def set_cue(self, cue: dict[int, float], always: tuple[int, ...] = (),
+                local: dict[int, float] | None = None) -> None:
         """This frame's cue per place; the active set is every place within
         ``cue_margin`` of the best, and ``always`` (the previous most likely place, its
-        nearest neighbours)."""
+        nearest neighbours). ``local``: each place's local space match (design §4; a
+        place without a profile is left out of it): of the cue's places, only those
+        within ``local_space_margin`` of the best match, or without one, stay (thesis
+        §9.4.1's local space set)."""
         self.cue = cue
         if not cue:
             self.active = None
             return
         top = max(cue.values())
-        self.active = {p for p, c in cue.items() if c >= top - self.settings.cue_margin} \
-            | set(always)
+        active = {p for p, c in cue.items() if c >= top - self.settings.cue_margin}
+        if local:
+            best = max(local.values())
+            active = {p for p in active
+                      if local.get(p, best) >= best - self.settings.local_space_margin}
+        self.active = active | set(always)
 
     @property
     def running(self) -> bool:

@@ -53,11 +53,13 @@ from daemon.mapping.place import Place
 from daemon.mapping.settings import AcquisitionSettings, OdometryNoiseSettings
 from daemon.mapping.transition import Transition
 from daemon.vision.disambiguation import Feature, PairFeatures, choose
+from daemon.vision.floor import FloorModel
+from daemon.vision.local_space import CAP_M, LocalSpace, match_many
 from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
 from daemon.vision.signature import signature, similarity
 from daemon.vision.unwarp import Unwarper
 from kernel.errors import PlacecellError
-from kernel.panorama import to_grey
+from kernel.panorama import core_of, to_grey
 from kernel.se2 import SE2, UncertainSE2
 from kernel.sensor_settings import MirrorSettings, PanoramaSettings
 from kernel.types import Frame, Odometry
@@ -133,6 +135,7 @@ class Localiser:
         self._features: dict[frozenset[int], PairFeatures] = {}
         self._ambiguous_frames = 0  # the search's pick ambiguous this many frames in a row
         self._told_apart: Disambiguation | None = None  # in this frame
+        self._floor_learned: FloorModel | None = None  # in this frame
         self._undecided: int | None = None  # the search's pick while look-alikes stand tied
         self._frames = 0
         self.mode: Mode = "search"
@@ -143,6 +146,11 @@ class Localiser:
         self._mode_frames = 0  # frames in this mode or recovery step
         self._episode: tuple[int, int] | None = None  # (stamp, frame) the loss or search began
         self._confirming = "global"  # how the place being confirmed was chosen
+        p = self.unwarper.panorama
+        self.local_space = LocalSpace((p.height, p.width),
+                                      int(math.floor(self.unwarper.horizon_row())),
+                                      self.unwarper.floor_distance_of_rows()
+                                      ) if self.settings.local_space else None
 
     # ------------------------------------------------------------------ the map
     def know_place(self, place: Place) -> None:
@@ -181,6 +189,23 @@ class Localiser:
             self.know_transition(t)
         self.set_pose(place.id, (0.0, 0.0, 0.0), AFTER_LEARNING_SIGMA_M,
                       AFTER_LEARNING_SIGMA_RAD)
+
+    def know_floor(self, floor: FloorModel) -> None:
+        """The floor model stored with the map (design §4): the places' profiles were
+        made with it, so it is used instead of learning one from the first frame. Call
+        before the first frame."""
+        if self.local_space is not None:
+            self.local_space.know_floor(floor)
+
+    def place_profile(self, reference_panorama: np.ndarray | None) -> np.ndarray | None:
+        """The local space profile (design §4) of a place being learned, from its colour
+        reference panorama through the floor learned on this run; None before the floor
+        is (no colour frame yet) or without a colour panorama."""
+        local = self.local_space
+        if local is None or local.colour is None or reference_panorama is None \
+                or reference_panorama.ndim != 3:
+            return None
+        return local.profile_of(core_of(reference_panorama, self.unwarper.panorama.wrap_margin))
 
     def set_pose(self, place_id: int, pose: tuple[float, float, float],
                  sigma_xy: float | None = None, sigma_yaw: float | None = None) -> None:
@@ -243,8 +268,17 @@ class Localiser:
         t0 = time.perf_counter()  # timing only; never used by the method
         self.panorama = self.unwarper.unwarp(frame.image)
         grey = to_grey(self.panorama)
-        self._told_apart = None
+        self._told_apart = self._floor_learned = None
         timings = {"unwarp": (time.perf_counter() - t0) * 1e3}
+        local_space = self.local_space
+        if local_space is not None and self.panorama.ndim == 3 and (
+                self.mode != "track" or self._frames % self.settings.local_space_every == 0):
+            t1 = time.perf_counter()
+            knew = local_space.floor is not None
+            local_space.update(core_of(self.panorama, self.unwarper.panorama.wrap_margin))
+            if not knew:  # learned from this frame: the map keeps it
+                self._floor_learned = local_space.floor
+            timings["local_space"] = (time.perf_counter() - t1) * 1e3
         odo = self.odometry.at(frame.stamp_ns, max_extrapolation_ns=self.ODOMETRY_STALE_NS)
         motion = None
         if odo is not None and self._last_odometry is not None:
@@ -476,11 +510,25 @@ class Localiser:
                              for p in with_signature])
             here = signature(grey, self.unwarper.panorama.wrap_margin)
             self.search.set_cue(dict(zip(with_signature, similarity(here, sigs).tolist(),
-                                         strict=True)), first)
+                                         strict=True)), first, self._local_matches(places))
         scored = self._score_many(prepare(), self.search.to_score(places, first),
                                   estimated=True)
         self.search.observe(scored)
         return scored
+
+    def _local_matches(self, places: list[int]) -> dict[int, float] | None:
+        """Each place's local space match with the floor grid now (design §4), for the
+        places with a profile; None while the floor is not learned."""
+        local = self.local_space
+        if local is None or local.colour is None or self.settings.local_space_margin >= 1.0:
+            return None  # no floor yet, or every place kept whatever its match
+        with_profile = [p for p in places if self._known[p].place.local_space is not None]
+        if not with_profile:
+            return None
+        profiles = np.stack([self._known[p].place.local_space  # type: ignore[misc]
+                             for p in with_profile])
+        return dict(zip(with_profile, match_many(local.profile(), profiles, CAP_M).tolist(),
+                        strict=True))
 
     def _recovered(self, local: LocalResult) -> bool:
         return local.support >= self.settings.recovered_output and reliable(
@@ -637,7 +685,8 @@ class Localiser:
                       scores=scores, timings_ms=timings, recent_place=recent,
                       recent_place_lrp=recent_lrp, acquisition=decision,
                       backgrounds=background, switched_from=switched_from,
-                      closed_transition=closed, disambiguation=self._told_apart)
+                      closed_transition=closed, disambiguation=self._told_apart,
+                      floor_learned=self._floor_learned)
         no_odometry = "" if odometry_ok else \
             "; no odometry at this frame (base silent): motion unknown"
         tracker = self.tracker

@@ -136,6 +136,17 @@ class LocalisationSettings:
     cue_margin: float = setting(0.05, ge=0.0, le=2.0, doc="the active set: places whose "
                                 "signature similarity is within this of the best "
                                 "(design §9; thesis §9.4.1's B for local space)")
+    local_space: bool = setting(True, doc="track local space (design §4): the floor "
+                                "learned from the first colour frame, a floor grid fed "
+                                "every frame, and each place learned given its profile")
+    local_space_margin: float = setting(1.0, ge=0.0, le=1.0, doc="the active set keeps "
+                                        "only places whose local space profile matches "
+                                        "within this of the best (thesis §9.4.1's B, "
+                                        "0.075); 1, the default, keeps every place: on "
+                                        "office 1 it cost inclusion (design §9)")
+    local_space_every: int = setting(5, ge=1, le=1000, doc="while tracking, the floor "
+                                     "grid is fed every this many frames (every frame "
+                                     "while searching, confirming or recovering)")
     search_margin: float = setting(0.05, ge=0.0, le=1.0, doc="lost: a place leading the "
                                    "current one by this goes straight to global "
                                    "relocalisation (the robot was carried off)")

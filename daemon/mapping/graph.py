@@ -11,12 +11,15 @@ from collections.abc import Iterable
 from daemon.mapping.place import Place
 from daemon.mapping.transition import Transition
 from daemon.vision.disambiguation import PairFeatures
+from daemon.vision.floor import FloorModel
 from kernel.se2 import SE2
 
 
 class TopologicalMap:
     def __init__(self, places: Iterable[Place] = (), transitions: Iterable[Transition] = (),
-                 features: Iterable[PairFeatures] = ()) -> None:
+                 features: Iterable[PairFeatures] = (), floor: FloorModel | None = None
+                 ) -> None:
+        self.floor = floor  # the floor the places' local space profiles were made with
         self._places: dict[int, Place] = {}
         self._edges: dict[int, dict[int, Transition]] = {}
         self._features: dict[frozenset[int], PairFeatures] = {}  # look-alike pairs (§5)

@@ -230,6 +230,10 @@ class Daemon:
         acq = self.config.mapping.acquisition
         if self.mode != "mapping":
             return  # the map is read-only
+        if belief.floor_learned is not None and self.mapper.graph.floor is None:
+            self.mapper.save_floor(belief.floor_learned)
+            log.info("floor model learned from the first colour frame and stored with the "
+                     "map (gradient threshold %.3f)", belief.floor_learned.gradient_threshold)
         for place_id, background in belief.backgrounds:
             self.mapper.set_background(place_id, background)
             self.publish_event("background_measured", place=place_id,
@@ -285,10 +289,15 @@ class Daemon:
                            unwarper=self._unwarper, feed=FrameFeed(rate),
                            mover=BaseCommands(lambda: self.base.device), mapper=self.mapper,
                            reply=reply, on_done=self._learning_done, seen=self._seen,
-                           localisation=self.config.localisation)
+                           localisation=self.config.localisation,
+                           profile=self._place_profile)
             self._job = job
             job.start()
         return job
+
+    def _place_profile(self, reference_panorama: np.ndarray | None) -> np.ndarray | None:
+        localiser = self.processing.localiser
+        return None if localiser is None else localiser.place_profile(reference_panorama)
 
     def _seen(self) -> Seen | None:
         localiser = self.processing.localiser

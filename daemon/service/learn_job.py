@@ -18,6 +18,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+import numpy as np
+
 from daemon.localisation.odometry import OdometryBuffer
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.place import Place
@@ -148,11 +150,15 @@ class LearnJob:
                  feed: FrameFeed, mover: BaseCommands, mapper: Mapper, reply: Reply,
                  on_done: Callable[[LearnJob, LearnOutcome], None],
                  seen: Callable[[], Seen | None] = lambda: None,
-                 localisation: LocalisationSettings | None = None) -> None:
+                 localisation: LocalisationSettings | None = None,
+                 profile: Callable[[np.ndarray | None], np.ndarray | None] = lambda _: None
+                 ) -> None:
         """``seen``: the localiser's reliable estimate of the robot now, if any (it joins
         the new place to the map, design §6); ``localisation``: how look-alike places
-        are found (design §5)."""
+        are found (design §5); ``profile``: the local space profile of a reference
+        panorama (design §4), None while the localiser cannot tell."""
         self.label = label
+        self._profile = profile
         self.localisation = localisation or LocalisationSettings()
         self._seen = seen
         self.settings = settings
@@ -204,7 +210,8 @@ class LearnJob:
                 raise LearningAbortedError("learning aborted on request")
             self._reply("progress", {"phase": "storing", "fraction": 1.0})
             place = Place(tbl.result(), tbl.reference_panorama, label=self.label,
-                          created_unix_s=time.time())
+                          created_unix_s=time.time(),
+                          local_space=self._profile(tbl.reference_panorama))
             stored, transitions = self.mapper.add_place(place, self._link)
             outcome = LearnOutcome(stored, None, "")
             self._reply("progress", {"phase": "lookalikes", "fraction": 1.0})

@@ -13,6 +13,7 @@ import dataclasses
 import logging
 import math
 import threading
+import time
 
 import numpy as np
 
@@ -26,6 +27,7 @@ from daemon.mapping.settings import OdometryNoiseSettings
 from daemon.mapping.transition import Transition, TransitionSource
 from daemon.store.sqlite_store import MapStore, PlaceSummary
 from daemon.vision.disambiguation import PairFeatures
+from daemon.vision.floor import FloorModel
 from daemon.vision.recognition import PreparedTemplates
 from kernel.panorama import to_grey
 from kernel.se2 import SE2, UncertainSE2
@@ -241,6 +243,13 @@ class Mapper:
             if place_id in self.graph:
                 self.graph.add_place(dataclasses.replace(self.graph.place(place_id),
                                                          background_lrp=background_lrp))
+
+    def save_floor(self, floor: FloorModel) -> None:
+        """The floor model the localiser learned (design §4): kept with the map, so the
+        places' local space profiles are compared under one model in every run."""
+        with self._lock:
+            self.store.save_floor(floor, time.time())
+            self.graph.floor = floor
 
     @property
     def last_place(self) -> int | None:

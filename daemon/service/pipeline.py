@@ -26,6 +26,8 @@ def make_localiser(config: PlacecellConfig, graph: TopologicalMap,
         localiser.know_transition(transition)
     for pair in graph.features:
         localiser.know_features(pair)
+    if graph.floor is not None:
+        localiser.know_floor(graph.floor)
     start = config.localisation
     if start.initial_place:  # AMCL's set_initial_pose: track from there at once
         if start.initial_place in graph:

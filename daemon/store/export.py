@@ -5,8 +5,10 @@ A folder holds ``manifest.json`` (format, schema, geometry checksum), ``places.j
 template's bytes in base64 so they come back identical), ``transitions.json`` (both
 directions), ``features.json`` (the disambiguating features of look-alike pairs, design
 §5: position, scores and template bytes in base64; an export without it imports with
-none), and per place ``place-<id>.png`` (the reference panorama with its landmarks
-drawn, for people) and ``place-<id>-reference.png`` (the panorama itself, lossless).
+none), ``floor.json`` (the floor model the local space profiles were made with, design
+§4; absent when none was learned), and per place ``place-<id>.png`` (the reference
+panorama with its landmarks drawn, for people) and ``place-<id>-reference.png`` (the
+panorama itself, lossless).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from __future__ import annotations
 import base64
 import json
 import os
+import time
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +28,7 @@ from daemon.mapping.transition import Transition
 from daemon.store.sqlite_store import SCHEMA_VERSION, MapStore
 from daemon.vision.disambiguation import Feature, PairFeatures
 from daemon.vision.drawing import draw_landmarks
+from daemon.vision.floor import BINS, ColourModel, FloorModel
 from daemon.vision.landmarks import TEMPLATE, Landmark, LandmarkSet
 from kernel.errors import MapStoreError
 from kernel.se2 import SE2, UncertainSE2
@@ -50,6 +54,9 @@ def export_map(store: MapStore, folder: str | Path) -> int:
     _write_json(out / "places.json", places)
     _write_json(out / "transitions.json", transitions)
     _write_json(out / "features.json", features)
+    floor = store.floor()
+    if floor is not None:
+        _write_json(out / "floor.json", _floor_json(floor))
     _write_json(out / "manifest.json", {
         "format": FORMAT, "schema_version": SCHEMA_VERSION,
         "geometry_checksum": store.meta("geometry_checksum"),
@@ -75,6 +82,8 @@ def import_map(folder: str | Path, path: str | Path) -> int:
         places = [_place_from_json(d, src) for d in places_doc]
         transitions = [_transition_from_json(d) for d in transitions_doc]
         features = [_pair_from_json(d) for d in features_doc]
+        floor = _floor_from_json(_read_json(src / "floor.json")) \
+            if (src / "floor.json").exists() else None
     except (KeyError, TypeError, ValueError) as e:
         raise MapStoreError(f"{src}: malformed export ({type(e).__name__}: {e})") from e
     tmp = dst.with_name(dst.name + ".importing")
@@ -84,6 +93,8 @@ def import_map(folder: str | Path, path: str | Path) -> int:
     try:
         with store:
             store.import_places(places, transitions, features)
+            if floor is not None:
+                store.save_floor(floor, time.time())
         os.replace(tmp, dst)
     except BaseException:
         tmp.unlink(missing_ok=True)
@@ -178,6 +189,20 @@ def _feature_from_json(d: dict[str, Any]) -> Feature:
 def _pair_from_json(d: dict[str, Any]) -> PairFeatures:
     return PairFeatures(int(d["a"]), int(d["b"]), _feature_from_json(d["feature_a"]),
                         _feature_from_json(d["feature_b"]))
+
+
+def _floor_json(floor: FloorModel) -> dict[str, Any]:
+    histogram = np.ascontiguousarray(floor.colour.histogram, np.uint8)
+    return {"gradient_threshold": floor.gradient_threshold,
+            "histogram": base64.b64encode(histogram.tobytes()).decode("ascii")}
+
+
+def _floor_from_json(d: dict[str, Any]) -> FloorModel:
+    raw = base64.b64decode(d["histogram"], validate=True)
+    if len(raw) != BINS * BINS:
+        raise ValueError(f"a floor colour histogram has {BINS * BINS} bytes, got {len(raw)}")
+    return FloorModel(ColourModel(np.frombuffer(raw, np.uint8).reshape(BINS, BINS).copy()),
+                      float(d["gradient_threshold"]))
 
 
 def _write_png(path: Path, image: np.ndarray) -> None:

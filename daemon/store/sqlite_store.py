@@ -31,12 +31,13 @@ from daemon.mapping.place import Place
 from daemon.mapping.transition import Transition
 from daemon.store import codec
 from daemon.vision.disambiguation import Feature, PairFeatures
+from daemon.vision.floor import BINS, ColourModel, FloorModel
 from kernel.errors import MapStoreError
 from kernel.se2 import SE2, UncertainSE2
 
 log = logging.getLogger(__name__)
 
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 6
 APPLICATION = "placecell-map"
 
 _SCHEMA = """
@@ -87,7 +88,15 @@ CREATE TABLE features (                                   -- v5: disambiguating 
     PRIMARY KEY (place_id, other_id)
 )
 """
-_SCHEMA += ";" + _RESUME_TABLE + ";" + _FEATURES_TABLE
+_FLOOR_TABLE = """
+CREATE TABLE floor (                                      -- v6: the floor model (design §4)
+    id           INTEGER PRIMARY KEY CHECK (id = 1),      -- one row
+    histogram    BLOB NOT NULL,                           -- 256 x 256 uint8 rg chromaticity
+    gradient_threshold REAL NOT NULL,                     -- daemon/vision/floor.py
+    learned_unix_s REAL NOT NULL
+)
+"""
+_SCHEMA += ";" + _RESUME_TABLE + ";" + _FEATURES_TABLE + ";" + _FLOOR_TABLE
 
 
 _PLACE_COLUMNS = ("id, label, created_unix_s, background_lrp, landmarks, local_space, "
@@ -236,7 +245,7 @@ class MapStore:
         :meth:`reference_panorama`); every landmark set's digest checked."""
         rows = self._all(f"SELECT {_PLACE_COLUMNS} FROM places ORDER BY id")
         places = [self._decode_place(r) for r in rows]
-        return TopologicalMap(places, self.transitions(), self.features())
+        return TopologicalMap(places, self.transitions(), self.features(), self.floor())
 
     def _decode_place(self, row: Sequence[Any]) -> Place:
         pid, label, created, background, lm_blob, ls_blob, stored, estimate, sig = row
@@ -315,6 +324,27 @@ class MapStore:
                 "saved_unix_s) VALUES (1, ?, ?, ?, ?, ?, ?)",
                 (saved.place_id, *map(float, saved.pose), cov.tobytes(),
                  float(saved.saved_unix_s)))
+
+    def save_floor(self, floor: FloorModel, learned_unix_s: float) -> None:
+        """Replace the floor model (one row) the places' profiles are made with."""
+        self._writable()
+        histogram = np.ascontiguousarray(floor.colour.histogram, dtype=np.uint8)
+        with self._lock, _transaction(self._db):
+            self._db.execute("INSERT OR REPLACE INTO floor(id, histogram, gradient_threshold, "
+                             "learned_unix_s) VALUES (1, ?, ?, ?)",
+                             (histogram.tobytes(), float(floor.gradient_threshold),
+                              float(learned_unix_s)))
+
+    def floor(self) -> FloorModel | None:
+        """The floor model stored with the map, or None (none learned yet)."""
+        row = self._one("SELECT histogram, gradient_threshold FROM floor WHERE id = 1")
+        if row is None:
+            return None
+        histogram = np.frombuffer(bytes(row[0]), dtype=np.uint8)
+        try:
+            return FloorModel(ColourModel(histogram.reshape(BINS, BINS).copy()), float(row[1]))
+        except ValueError as e:
+            raise MapStoreError(f"{self.path}: the floor model is damaged ({e})") from e
 
     def put_features(self, pair: PairFeatures) -> None:
         """Store (or replace) the features of a pair of look-alike places, both ways, in
@@ -493,7 +523,8 @@ def _migrate(db: sqlite3.Connection, p: Path, version: int) -> None:
     tables) is rebuilt; 2 gains places.background_estimate and places.signature (NULL:
     the daemon's mapper makes them from the stored reference panoramas); 2 and 3 gain
     the resume table (no pose saved); 2 to 4 gain the features table (none yet: the
-    daemon's mapper finds the look-alike pairs and their features)."""
+    daemon's mapper finds the look-alike pairs and their features); 2 to 5 gain the
+    floor table (no floor model: the localiser learns one from its first colour frame)."""
     with _transaction(db):
         if version == 2:
             db.execute("ALTER TABLE places ADD COLUMN background_estimate REAL")
@@ -502,6 +533,8 @@ def _migrate(db: sqlite3.Connection, p: Path, version: int) -> None:
             db.execute(_RESUME_TABLE)
         if version in (2, 3, 4):
             db.execute(_FEATURES_TABLE)
+        if version in (2, 3, 4, 5):
+            db.execute(_FLOOR_TABLE)
             db.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'",
                        (str(SCHEMA_VERSION),))
         if version == 1:

@@ -25,15 +25,14 @@ import cv2
 import numpy as np
 
 BINS = 256
+_LOG1P = np.log1p(np.arange(256, dtype=np.float32))  # log intensity of a grey level
 
 
 def chromaticity(bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(r, g) bin indices 0..255 of every pixel of a (..., 3) BGR array."""
-    f = bgr.astype(np.float32)
-    total = f.sum(axis=-1) + 1e-6
-    r = np.clip(f[..., 2] / total * (BINS - 1), 0, BINS - 1).astype(np.intp)
-    g = np.clip(f[..., 1] / total * (BINS - 1), 0, BINS - 1).astype(np.intp)
-    return r, g
+    b, g, r = (bgr[..., k].astype(np.float32) for k in range(3))
+    scale = (BINS - 1) / (b + g + r + 1e-6)  # r, g <= 1: no bin above 255
+    return (r * scale).astype(np.int32), (g * scale).astype(np.int32)
 
 
 @dataclass(frozen=True)
@@ -57,21 +56,46 @@ class ColourModel:
 
     def likelihood(self, bgr: np.ndarray) -> np.ndarray:
         """(H, W) float32 in [0, 1]: how floor-coloured each pixel is."""
+        return self.levels(bgr).astype(np.float32) / 255.0
+
+    def levels(self, bgr: np.ndarray) -> np.ndarray:
+        """(H, W) uint8: the histogram's value at each pixel's chromaticity."""
         r, g = chromaticity(bgr)
-        return self.histogram[r, g].astype(np.float32) / 255.0
+        return self.histogram.ravel().take(r * BINS + g)
+
+
+@dataclass(frozen=True)
+class FloorModel:
+    """What the robot learns about the floor (stored with the map, SPEC §4): its colour
+    and the vertical step its texture does not make (:func:`texture_threshold`)."""
+
+    colour: ColourModel
+    gradient_threshold: float
+
+    def __post_init__(self) -> None:
+        h = self.colour.histogram
+        if h.shape != (BINS, BINS) or h.dtype != np.uint8:
+            raise ValueError(f"a floor colour histogram is {BINS} x {BINS} uint8, got "
+                             f"{h.shape} {h.dtype}")
+        if not (np.isfinite(self.gradient_threshold) and self.gradient_threshold > 0):
+            raise ValueError(f"a floor's gradient threshold is positive, got "
+                             f"{self.gradient_threshold}")
 
 
 def vertical_steps(grey: np.ndarray, rows: int = 3, columns: int = 5) -> np.ndarray:
     """(H, W) float32: at row r, |mean of log intensity over rows r..r + rows − 1 − that
     over rows r − rows..r − 1|, after averaging ``columns`` columns across (0 where the
-    rows do not fit). On the log intensity a change of light scales nothing."""
-    g = np.asarray(cv2.blur(np.log1p(grey.astype(np.float32)), (columns, 1),
-                            borderType=cv2.BORDER_WRAP))
-    h = g.shape[0]
-    cum = np.vstack([np.zeros((1, g.shape[1]), np.float32), np.cumsum(g, axis=0)])
-    r = np.arange(rows, h - rows + 1)
+    rows do not fit; ``rows`` odd). On the log intensity a change of light scales
+    nothing."""
+    if rows % 2 == 0:
+        raise ValueError(f"vertical_steps: rows must be odd, got {rows}")
+    g = (_LOG1P[grey] if grey.dtype == np.uint8
+         else np.log1p(grey.astype(np.float32)))
+    box = np.asarray(cv2.blur(g, (columns, rows), borderType=cv2.BORDER_WRAP))
+    h, half = g.shape[0], rows // 2  # box[c]: the mean over rows c − half..c + half
     step = np.zeros_like(g)
-    step[r] = np.abs((cum[r + rows] - cum[r]) - (cum[r] - cum[r - rows])) / rows
+    r0, r1 = rows, h - rows + 1  # rows r with r − rows >= 0 and r + rows − 1 < h
+    np.abs(box[r0 + half:r1 + half] - box[r0 - half - 1:r1 - half - 1], out=step[r0:r1])
     return step
 
 
@@ -139,41 +163,52 @@ class FloorGrid:
                  gradient_threshold: float | None = None) -> None:
         """``gradient_threshold``: learned from the floor (:func:`texture_threshold`);
         the settings' fixed one without."""
-        self.settings = settings or FloorSettings()
-        self.gradient_threshold = (self.settings.gradient_threshold
+        s = self.settings = settings or FloorSettings()
+        self.gradient_threshold = (s.gradient_threshold
                                    if gradient_threshold is None else gradient_threshold)
         self.horizon_row = horizon_row
-        self.log_odds = np.zeros(shape, np.float32)
-        self._sky = slice(0, horizon_row + 1)  # rows never floor
+        self.log_odds = np.full(shape, -s.saturation, np.float32)  # the sky: never floor
+        self.log_odds[horizon_row + 1:] = 0.0
+        self._ground = horizon_row + 1  # the rows that can be floor
+        # Each method's log-odds as a table: by histogram value (colour), by below /
+        # above / no boundary (gradient).
+        level = np.minimum(np.arange(256) / 255.0 / s.colour_level, 1.0)
+        self._colour_lut = _log_odds(0.5 + s.colour_weight * (level - 0.5))
+        self._gradient_lo = float(_log_odds(np.array(s.gradient_p)))
 
     def observations(self, bgr: np.ndarray, colour: ColourModel | None
                      ) -> dict[str, np.ndarray]:
-        """Each method's p(floor) for this frame ("colour" only with a model)."""
-        s = self.settings
+        """Each method's p(floor) for this frame ("colour" only with a model), rows
+        below the horizon."""
+        return {name: (1.0 / (1.0 + np.exp(-lo))).astype(np.float32)
+                for name, lo in self._evidence(bgr, colour).items()}
+
+    def _evidence(self, bgr: np.ndarray, colour: ColourModel | None
+                  ) -> dict[str, np.ndarray]:
+        """Each method's log-odds of floor in this frame, rows below the horizon."""
         grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
         boundary = gradient_boundary(grey, self.horizon_row, self.gradient_threshold)
-        below = np.arange(grey.shape[0])[:, None] >= boundary[None, :]
+        rows = np.arange(self._ground, grey.shape[0])[:, None]
         # A column without a boundary says nothing: the floor may be too like the wall
         # for a step, or not in view.
-        p = np.where(below, s.gradient_p, 1.0 - s.gradient_p)
-        p[:, boundary >= grey.shape[0]] = 0.5
-        out = {"gradient": p}
+        lo = np.where(rows >= boundary[None, :], self._gradient_lo, -self._gradient_lo)
+        lo[:, boundary >= grey.shape[0]] = 0.0
+        out = {"gradient": lo.astype(np.float32)}
         if colour is not None:
             # A colour seen on the floor a tenth as often as its commonest one is still a
             # floor colour: the likelihood is read relative to ``colour_level``.
-            level = np.minimum(colour.likelihood(bgr) / s.colour_level, 1.0)
-            out["colour"] = 0.5 + s.colour_weight * (level - 0.5)
+            out["colour"] = self._colour_lut[colour.levels(bgr[self._ground:])]
         return out
 
     def update(self, bgr: np.ndarray, colour: ColourModel | None,
                methods: tuple[str, ...] = ("colour", "gradient")) -> None:
         """One frame (the panorama's core, BGR): the chosen methods' evidence added."""
         limit = self.settings.saturation
-        for name, p in self.observations(bgr, colour).items():
+        ground = self.log_odds[self._ground:]
+        for name, lo in self._evidence(bgr, colour).items():
             if name in methods:
-                self.log_odds += _log_odds(p)
-        np.clip(self.log_odds, -limit, limit, out=self.log_odds)
-        self.log_odds[self._sky] = -limit
+                ground += lo
+        np.clip(ground, -limit, limit, out=ground)
 
     def probability(self) -> np.ndarray:
         return (1.0 / (1.0 + np.exp(-self.log_odds))).astype(np.float32)

@@ -11,9 +11,22 @@ largest possible bin value (§5.2.2): 1 for the same spot turned by a multiple o
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
+from daemon.vision.floor import (
+    ColourModel,
+    FloorGrid,
+    FloorModel,
+    FloorSettings,
+    texture_threshold,
+)
+from kernel.panorama import column_of_bearing
+
 BINS = 16
+CAP_M = 5.0  # a bin of profile_m at most this: its largest value
+AHEAD_DEG = 20.0  # the floor sample: within this of straight ahead...
+SAMPLE_ROWS = 12  # ...in the panorama's bottom rows
 
 
 def profile(floor_mask: np.ndarray, bins: int = BINS) -> np.ndarray:
@@ -27,7 +40,7 @@ def profile(floor_mask: np.ndarray, bins: int = BINS) -> np.ndarray:
     return extent.reshape(bins, w // bins).mean(axis=1).astype(np.float64)
 
 
-def profile_m(floor_mask: np.ndarray, distance_of_rows: np.ndarray, cap_m: float = 5.0,
+def profile_m(floor_mask: np.ndarray, distance_of_rows: np.ndarray, cap_m: float = CAP_M,
               bins: int = BINS) -> np.ndarray:
     """(bins,) free-space extents in metres: per column the floor distance of the
     farthest floor row counted up from the bottom (0 where the bottom row is no floor),
@@ -52,11 +65,17 @@ def match(h1: np.ndarray, h2: np.ndarray, max_value: float) -> float:
 
 
 def match_many(h: np.ndarray, profiles: np.ndarray, max_value: float) -> np.ndarray:
-    """(P,) the match of ``h`` (bins,) with each row of ``profiles`` (P, bins)."""
+    """(P,) the match of ``h`` (bins,) with each row of ``profiles`` (P, bins): for each
+    row the nearest of ``h``'s circular shifts in L1 (OpenCV's brute-force nearest
+    neighbour, ``batchDistance`` with K = 1)."""
     bins = h.shape[0]
-    shifts = np.stack([np.roll(h, k) for k in range(bins)])  # (bins, bins)
-    sad = np.abs(profiles[:, None, :] - shifts[None, :, :]).sum(axis=2)  # (P, bins)
-    return np.asarray(1.0 - sad.min(axis=1) / (max_value * bins))
+    if len(profiles) == 0:
+        return np.zeros(0)
+    turn = (np.arange(bins)[None, :] - np.arange(bins)[:, None]) % bins
+    shifts = np.ascontiguousarray(np.asarray(h, np.float32)[turn])  # row k: h rolled by k
+    sad, _ = cv2.batchDistance(np.ascontiguousarray(profiles, np.float32), shifts,
+                               cv2.CV_32F, normType=cv2.NORM_L1, K=1)
+    return np.asarray(1.0 - sad[:, 0].astype(np.float64) / (max_value * bins))
 
 
 def local_space_set(h: np.ndarray, profiles: np.ndarray, max_value: float,
@@ -65,3 +84,60 @@ def local_space_set(h: np.ndarray, profiles: np.ndarray, max_value: float,
     B = 0.075 kept the true place in the set on 98 % of frames)."""
     c = match_many(h, profiles, max_value)
     return np.flatnonzero(c >= c.max() - margin)
+
+
+class LocalSpace:
+    """Local space as the robot sees it (design §4): the floor model learned from the
+    floor in front of it, the floor grid fed every frame, the grid's profile in metres.
+    Panoramas are colour cores (no wrap margin)."""
+
+    def __init__(self, shape: tuple[int, int], horizon_row: int,
+                 distance_of_rows: np.ndarray, settings: FloorSettings | None = None) -> None:
+        self.shape, self.horizon_row = shape, horizon_row
+        self.distance_of_rows = distance_of_rows
+        self.settings = settings or FloorSettings()
+        self.colour: ColourModel | None = None
+        self.gradient_threshold: float | None = None
+        self.grid = self._grid()
+
+    def _grid(self) -> FloorGrid:
+        return FloorGrid(self.shape, self.horizon_row, self.settings, self.gradient_threshold)
+
+    def learn_floor(self, core_bgr: np.ndarray) -> None:
+        """The floor model from the bottom ``SAMPLE_ROWS`` rows within ``AHEAD_DEG`` of
+        ahead (SPEC §4: the region right in front of the robot at start-up): its colour
+        and the step its texture does not make. The grid starts again."""
+        width = core_bgr.shape[1]
+        centre = int(round(float(column_of_bearing(0.0, width))))
+        half = int(round(width * AHEAD_DEG / 360.0))
+        patch = core_bgr[-SAMPLE_ROWS:, np.arange(centre - half, centre + half + 1) % width]
+        self.know_floor(FloorModel(ColourModel.learn(patch), texture_threshold(
+            cv2.cvtColor(patch, cv2.COLOR_BGR2GRAY))))
+
+    def know_floor(self, floor: FloorModel) -> None:
+        """The floor model to use (learned, or stored with the map); the grid starts
+        again."""
+        self.colour, self.gradient_threshold = floor.colour, floor.gradient_threshold
+        self.grid = self._grid()
+
+    @property
+    def floor(self) -> FloorModel | None:
+        if self.colour is None or self.gradient_threshold is None:
+            return None
+        return FloorModel(self.colour, self.gradient_threshold)
+
+    def update(self, core_bgr: np.ndarray,
+               methods: tuple[str, ...] = ("colour", "gradient")) -> None:
+        """One frame into the grid (the floor learned from it first if not yet)."""
+        if self.colour is None:
+            self.learn_floor(core_bgr)
+        self.grid.update(core_bgr, self.colour, methods)
+
+    def profile(self) -> np.ndarray:
+        return profile_m(self.grid.mask(), self.distance_of_rows)
+
+    def profile_of(self, core_bgr: np.ndarray) -> np.ndarray:
+        """The profile one panorama gives alone (e.g. a place's reference panorama)."""
+        grid = self._grid()
+        grid.update(core_bgr, self.colour)
+        return profile_m(grid.mask(), self.distance_of_rows)

@@ -71,14 +71,17 @@ class World:
 
 
 def load_world(spec: str) -> World:
-    """A world from a TOML file, or ``generate:<kind>:<seed>``."""
+    """A world from a TOML file, or ``generate:<kind>:<seed>[:<floor>]`` (a floor of
+    ``worldgen.FLOORS``; the generated ``fine`` one without)."""
     if spec.startswith("generate:"):
-        from hal.sim.worldgen import generate
+        from hal.sim.worldgen import generate, with_floor
 
         parts = spec.split(":")
-        if len(parts) != 3 or not parts[2].lstrip("-").isdigit():
-            raise ConfigError(f"world spec {spec!r}: expected generate:<kind>:<seed>")
-        return generate(parts[1], int(parts[2]))
+        if len(parts) not in (3, 4) or not parts[2].lstrip("-").isdigit():
+            raise ConfigError(f"world spec {spec!r}: expected generate:<kind>:<seed>"
+                              f"[:<floor>]")
+        world = generate(parts[1], int(parts[2]))
+        return with_floor(world, parts[3]) if len(parts) == 4 else world
     path = Path(spec)
     data = read_toml(path, "world")
     try:

@@ -3,9 +3,15 @@
 Kinds: ``office`` (rooms off a corridor, about 30 x 20 m), ``corridor``,
 ``aliased-corridor`` (identical doors at a fixed spacing; a small sign beside each is the
 only thing that tells places apart), ``open-room`` (a cluttered 7 x 10 m room).
+
+Floors: a generated world has the ``fine`` floor (nearly one flat colour);
+:func:`with_floor` gives it one of ``FLOORS``, as hard as real ones (design §4).
 """
 
 from __future__ import annotations
+
+import dataclasses
+from typing import Any
 
 import numpy as np
 
@@ -15,6 +21,29 @@ from kernel.errors import ConfigError
 KINDS = ("office", "corridor", "aliased-corridor", "open-room")
 WALL_COLOURS = [(200, 205, 210), (170, 190, 200), (185, 200, 185), (150, 170, 200),
                 (210, 200, 180)]
+
+
+# name -> World fields. "-coloured": the carpet in the commonest colour of the obstacles
+# (cabinets) or of the full-height walls.
+FLOORS: dict[str, dict[str, Any]] = {
+    "carpet": {"floor_texture": "carpet", "floor_shadow": 0.5},
+    "glossy-tiles": {"floor_texture": "tiles", "floor_gloss": 0.3, "floor_shadow": 0.5},
+    "obstacle-coloured": {"floor_texture": "carpet", "floor_shadow": 0.5},
+    "wall-coloured": {"floor_texture": "carpet", "floor_shadow": 0.5},
+}
+
+
+def with_floor(world: World, name: str) -> World:
+    """``world`` with the floor ``name`` of ``FLOORS``."""
+    if name not in FLOORS:
+        raise ConfigError(f"unknown floor {name!r} (known: {', '.join(FLOORS)})")
+    fields = dict(FLOORS[name])
+    if name.endswith("-coloured"):
+        colours = [w.colour for w in world.walls
+                   if (w.height_m is None) == (name == "wall-coloured")]
+        if colours:
+            fields["floor_colour"] = max(set(colours), key=colours.count)
+    return dataclasses.replace(world, name=f"{world.name}-{name}", **fields)
 
 
 def generate(kind: str, seed: int) -> World:

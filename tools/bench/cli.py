@@ -21,6 +21,7 @@ GROUPS = {
     "localisation": "tools.bench.localisation",
     "global": "tools.bench.global_search",
     "disambiguation": "tools.bench.disambiguation",
+    "local_space": "tools.bench.local_space",
 }
 
 

@@ -1,7 +1,8 @@
 """``placecell-eval floor``: floor detection and local space profiles against the
 simulator's ground-truth floor masks (design §4; thesis §5.1.4, Table 5.2; §5.2).
 
-The world (office by default) is given each of the hard floors in ``DEFAULT_FLOORS`` — a
+The world (office by default) is given each of the hard floors in ``DEFAULT_FLOORS``
+(hal/sim/worldgen.py) — a
 patterned carpet, glossy tiles that mirror the walls, and a carpet the colour of the
 cabinets (``wall-coloured``, the colour of the walls, on request) — all with shadows
 along walls and under obstacles. At ``--poses`` random free
@@ -31,7 +32,6 @@ from a fresh grid after 10 frames 1 m away (free direction chosen at random), wi
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 from typing import Any
 
@@ -39,26 +39,19 @@ import cv2
 import numpy as np
 
 from daemon.config import load
-from daemon.vision.floor import ColourModel, FloorGrid, texture_threshold
-from daemon.vision.local_space import match, profile, profile_m
+from daemon.vision.floor import ColourModel, FloorGrid
+from daemon.vision.local_space import CAP_M, LocalSpace, match, profile, profile_m
 from daemon.vision.unwarp import Unwarper
 from hal.sim.render import Person, Renderer
 from hal.sim.world import World, load_world
-from kernel.panorama import column_of_bearing, core_of
+from hal.sim.worldgen import FLOORS, with_floor
+from kernel.panorama import core_of
 
-# name -> World fields: each a floor as hard as a real one (design §4)
-FLOORS: dict[str, dict[str, Any]] = {
-    "carpet": {"floor_texture": "carpet", "floor_shadow": 0.5},
-    "glossy-tiles": {"floor_texture": "tiles", "floor_gloss": 0.3, "floor_shadow": 0.5},
-    "obstacle-coloured": {"floor_texture": "carpet", "floor_shadow": 0.5},  # a cabinet's
-    "wall-coloured": {"floor_texture": "carpet", "floor_shadow": 0.5},  # the commonest wall's
-}
 DEFAULT_FLOORS = ("carpet", "glossy-tiles", "obstacle-coloured")  # wall-coloured: design §4
 METHODS = {"colour": ("colour",), "gradient": ("gradient",), "fused": ("colour", "gradient")}
 FRAMES = 5
 PROFILE_FRAMES = 10
 PERSON_FRAMES = 8
-CAP_M = 5.0  # a profile bin's largest value, metres
 CLEARANCE_M = 0.5  # a pose this far from every wall and obstacle at least
 
 
@@ -66,15 +59,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--poses", type=int, default=12, help="random free poses per floor")
     p.add_argument("--floors", default=",".join(DEFAULT_FLOORS),
                    help=f"comma-separated, from {', '.join(FLOORS)}")
-
-
-def _with_floor(world: World, name: str) -> World:
-    fields = dict(FLOORS[name])
-    if name.endswith("-coloured"):  # the commonest colour of the walls or obstacles
-        colours = [w.colour for w in world.walls
-                   if (w.height_m is None) == (name == "wall-coloured")]
-        fields["floor_colour"] = max(set(colours), key=colours.count)
-    return dataclasses.replace(world, name=f"{world.name}-{name}", **fields)
 
 
 def _clearance(world: World, x: float, y: float) -> float:
@@ -195,16 +179,15 @@ def _floor_run(eye: _Eye, world: World, learned: tuple[ColourModel, float],
     return out
 
 
-def _learn_floor(eye: _Eye, world: World) -> tuple[ColourModel, float]:
-    """The floor in front of the robot at start-up (bottom 12 rows, ±20° of ahead): its
-    colour model and the step its texture does not make."""
-    pano = eye.view(world.start_pose)
-    width = pano.shape[1]
-    centre = int(round(float(column_of_bearing(0.0, width))))
-    half = int(round(width * 20.0 / 360.0))
-    patch = pano[-12:, np.arange(centre - half, centre + half + 1) % width]
-    return ColourModel.learn(patch), texture_threshold(cv2.cvtColor(patch,
-                                                                    cv2.COLOR_BGR2GRAY))
+def _learn_floor(eye: _Eye, world: World, horizon: int) -> tuple[ColourModel, float]:
+    """The floor in front of the robot at start-up, as the method learns it
+    (``LocalSpace.learn_floor``): its colour model and the step its texture does not
+    make."""
+    local = LocalSpace((eye.renderer.pano.height, eye.renderer.pano.width), horizon,
+                       eye.unwarper.floor_distance_of_rows())
+    local.learn_floor(eye.view(world.start_pose))
+    assert local.colour is not None and local.gradient_threshold is not None
+    return local.colour, local.gradient_threshold
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
@@ -222,9 +205,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     by_floor: dict[str, dict[str, float]] = {}
     pooled: dict[str, list[float]] = {}
     for name in names:
-        world = _with_floor(base, name)
+        world = with_floor(base, name)
         eye = _Eye(world, config, np.random.default_rng([args.seed, len(by_floor)]))
-        learned = _learn_floor(eye, world)
+        learned = _learn_floor(eye, world, horizon)
         got = _floor_run(eye, world, learned, poses, horizon,
                          np.random.default_rng([args.seed, 7]))
         by_floor[name] = {k.replace(".", "p"): round(float(np.mean(v)), 4)

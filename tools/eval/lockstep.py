@@ -125,6 +125,8 @@ class Run:
         t0 = time.perf_counter()
         belief = self.localiser.process_frame(frame)
         self.process_s.append(time.perf_counter() - t0)
+        if belief.floor_learned is not None and self.mapper.graph.floor is None:
+            self.mapper.save_floor(belief.floor_learned)  # as the daemon does
         return frame, belief
 
     def drive(self, dx: float, dy: float, dyaw: float, speed: float) -> Iterator[Belief]:
@@ -158,7 +160,8 @@ class Run:
         tbl = drive_tbl(self.sensors, self.base, self.localiser.unwarper, self.cfg.tbl,
                         on_start=start)
         stored, added = self.mapper.add_place(
-            Place(tbl.result(), tbl.reference_panorama, label=label), link[0])
+            Place(tbl.result(), tbl.reference_panorama, label=label,
+                  local_space=self.localiser.place_profile(tbl.reference_panorama)), link[0])
         place = dataclasses.replace(stored, reference_panorama=None)
         self.localiser.place_learned(place, added)  # as the daemon does
         for pair in self.mapper.learn_features(place.id, tbl.views, self.cfg.localisation):

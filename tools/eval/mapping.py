@@ -158,8 +158,9 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path
                 continue
             learn_s.append((robot.now_ns() - start_ns) / 1e9)
             ref = _reference_pose(robot)
-            stored, added = mapper.add_place(Place(tbl.result(), tbl.reference_panorama,
-                                                   created_unix_s=time.time()), link[0])
+            stored, added = mapper.add_place(Place(
+                tbl.result(), tbl.reference_panorama, created_unix_s=time.time(),
+                local_space=localiser.place_profile(tbl.reference_panorama)), link[0])
             refs.append(ref)
             localiser.place_learned(stored, added)  # as the daemon does after a learn job
             retry_at_m = None

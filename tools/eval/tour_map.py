@@ -113,6 +113,8 @@ def add_map_arguments(p: argparse.ArgumentParser, places: int) -> None:
     p.add_argument("--speed", type=float, default=0.3, help="m/s along the tour")
     p.add_argument("--map", type=Path, help="keep the map (and its references) here and "
                    "reuse it when built before with the same world and settings")
+    p.add_argument("--floor", help="give the world one of the hard floors of "
+                   "hal/sim/worldgen.py FLOORS (default: its own, nearly flat)")
     add_localisation_arguments(p)
 
 
@@ -123,6 +125,8 @@ def mapped_run(args: argparse.Namespace) -> Iterator[tuple[Run, list[Point]]]:
     Yields the run and the tour's points every 0.1 m."""
     base = load(None)
     world_spec = f"generate:{args.world_kind}:{args.world_seed}"
+    if getattr(args, "floor", None):
+        world_spec += f":{args.floor}"
     world = load_world(world_spec)
     settings = localisation_settings(base.localisation, args)
     cfg = lockstep_config(args.seed, world=world_spec, start_pose=world.start_pose,
