@@ -415,14 +415,14 @@ class Localiser:
         # mode "recover": steps 1 and 2 of §9.3.2
         if found:
             # Found in a place with look-alikes is found in one of them: the view of this
-            # place cannot say which, their features do (design §5).
+            # place cannot say which, their features can (design §5). Only features that
+            # clearly name another place move the robot there; unclear ones do not hold
+            # the recovery up (waiting cost the office's kidnaps their 10-frame mark).
             told = self._tell_apart(grey, current, places)
-            if told == current:
-                return scored, self._relocalised(current, RECOVERY_STEPS[self._step],
-                                                 stamp_ns)
-            if told is not None:
+            if told is not None and told != current:
                 self._start_in(grey, told)
-            return scored, None
+                return scored, None
+            return scored, self._relocalised(current, RECOVERY_STEPS[self._step], stamp_ns)
         leader = self._leader(grey, current, places)
         if leader is not None:
             self._start_in(grey, leader)
@@ -439,10 +439,13 @@ class Localiser:
 
     def _leader(self, grey: np.ndarray, current: int, places: list[int]) -> int | None:
         """The place the search finds clearly ahead of ``current`` (a kidnap: recovery
-        goes global at once), told apart from its look-alikes; None while none is, or
-        while the features have yet to decide."""
+        goes global at once), told apart from its look-alikes when their features are
+        clear (the leader itself while they are not); None while no place leads."""
         leader = self.search.leader_over(current, places)
-        return None if leader is None else self._tell_apart(grey, leader.place_id, places)
+        if leader is None:
+            return None
+        told = self._tell_apart(grey, leader.place_id, places)
+        return leader.place_id if told is None else told
 
     def _tell_apart(self, grey: np.ndarray, best: int, places: list[int]) -> int | None:
         """The search's pick (design §5, thesis §9.5): ``best`` unless places with
