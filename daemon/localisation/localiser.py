@@ -202,7 +202,7 @@ class Localiser:
         reference panorama through the floor learned on this run; None before the floor
         is (no colour frame yet) or without a colour panorama."""
         local = self.local_space
-        if local is None or local.colour is None or reference_panorama is None \
+        if local is None or local.floor is None or reference_panorama is None \
                 or reference_panorama.ndim != 3:
             return None
         return local.profile_of(core_of(reference_panorama, self.unwarper.panorama.wrap_margin))
@@ -523,7 +523,7 @@ class Localiser:
         """Each place's local space match with the floor grid now (design §4), for the
         places with a profile; None while the floor is not learned."""
         local = self.local_space
-        if local is None or local.colour is None or self.settings.local_space_margin >= 1.0:
+        if local is None or local.floor is None or self.settings.local_space_margin >= 1.0:
             return None  # no floor yet, or every place kept whatever its match
         with_profile = [p for p in places if self._known[p].place.local_space is not None]
         if not with_profile:

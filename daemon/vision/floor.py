@@ -176,13 +176,6 @@ class FloorGrid:
         self._colour_lut = _log_odds(0.5 + s.colour_weight * (level - 0.5))
         self._gradient_lo = float(_log_odds(np.array(s.gradient_p)))
 
-    def observations(self, bgr: np.ndarray, colour: ColourModel | None
-                     ) -> dict[str, np.ndarray]:
-        """Each method's p(floor) for this frame ("colour" only with a model), rows
-        below the horizon."""
-        return {name: (1.0 / (1.0 + np.exp(-lo))).astype(np.float32)
-                for name, lo in self._evidence(bgr, colour).items()}
-
     def _evidence(self, bgr: np.ndarray, colour: ColourModel | None
                   ) -> dict[str, np.ndarray]:
         """Each method's log-odds of floor in this frame, rows below the horizon."""

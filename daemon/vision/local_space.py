@@ -96,12 +96,12 @@ class LocalSpace:
         self.shape, self.horizon_row = shape, horizon_row
         self.distance_of_rows = distance_of_rows
         self.settings = settings or FloorSettings()
-        self.colour: ColourModel | None = None
-        self.gradient_threshold: float | None = None
+        self.floor: FloorModel | None = None  # learned, or stored with the map
         self.grid = self._grid()
 
     def _grid(self) -> FloorGrid:
-        return FloorGrid(self.shape, self.horizon_row, self.settings, self.gradient_threshold)
+        return FloorGrid(self.shape, self.horizon_row, self.settings,
+                         None if self.floor is None else self.floor.gradient_threshold)
 
     def learn_floor(self, core_bgr: np.ndarray) -> None:
         """The floor model from the bottom ``SAMPLE_ROWS`` rows within ``AHEAD_DEG`` of
@@ -117,21 +117,16 @@ class LocalSpace:
     def know_floor(self, floor: FloorModel) -> None:
         """The floor model to use (learned, or stored with the map); the grid starts
         again."""
-        self.colour, self.gradient_threshold = floor.colour, floor.gradient_threshold
+        self.floor = floor
         self.grid = self._grid()
-
-    @property
-    def floor(self) -> FloorModel | None:
-        if self.colour is None or self.gradient_threshold is None:
-            return None
-        return FloorModel(self.colour, self.gradient_threshold)
 
     def update(self, core_bgr: np.ndarray,
                methods: tuple[str, ...] = ("colour", "gradient")) -> None:
         """One frame into the grid (the floor learned from it first if not yet)."""
-        if self.colour is None:
+        if self.floor is None:
             self.learn_floor(core_bgr)
-        self.grid.update(core_bgr, self.colour, methods)
+        assert self.floor is not None
+        self.grid.update(core_bgr, self.floor.colour, methods)
 
     def profile(self) -> np.ndarray:
         return profile_m(self.grid.mask(), self.distance_of_rows)
@@ -139,5 +134,5 @@ class LocalSpace:
     def profile_of(self, core_bgr: np.ndarray) -> np.ndarray:
         """The profile one panorama gives alone (e.g. a place's reference panorama)."""
         grid = self._grid()
-        grid.update(core_bgr, self.colour)
+        grid.update(core_bgr, None if self.floor is None else self.floor.colour)
         return profile_m(grid.mask(), self.distance_of_rows)

@@ -39,7 +39,7 @@ import cv2
 import numpy as np
 
 from daemon.config import load
-from daemon.vision.floor import ColourModel, FloorGrid
+from daemon.vision.floor import FloorGrid, FloorModel
 from daemon.vision.local_space import CAP_M, LocalSpace, match, profile, profile_m
 from daemon.vision.unwarp import Unwarper
 from hal.sim.render import Person, Renderer
@@ -133,10 +133,10 @@ def _drops(now: dict[str, tuple[np.ndarray, float]],
     return {u: 1.0 - match(now[u][0], place[u][0], place[u][1]) for u in place}
 
 
-def _floor_run(eye: _Eye, world: World, learned: tuple[ColourModel, float],
+def _floor_run(eye: _Eye, world: World, learned: FloorModel,
                poses: list[Any], horizon: int, rng: np.random.Generator
                ) -> dict[str, list[float]]:
-    model, step = learned
+    model, step = learned.colour, learned.gradient_threshold
     distance = eye.unwarper.floor_distance_of_rows()
     below = horizon + 1
     shape = (eye.renderer.pano.height, eye.renderer.pano.width)
@@ -179,15 +179,15 @@ def _floor_run(eye: _Eye, world: World, learned: tuple[ColourModel, float],
     return out
 
 
-def _learn_floor(eye: _Eye, world: World, horizon: int) -> tuple[ColourModel, float]:
+def _learn_floor(eye: _Eye, world: World, horizon: int) -> FloorModel:
     """The floor in front of the robot at start-up, as the method learns it
     (``LocalSpace.learn_floor``): its colour model and the step its texture does not
     make."""
     local = LocalSpace((eye.renderer.pano.height, eye.renderer.pano.width), horizon,
                        eye.unwarper.floor_distance_of_rows())
     local.learn_floor(eye.view(world.start_pose))
-    assert local.colour is not None and local.gradient_threshold is not None
-    return local.colour, local.gradient_threshold
+    assert local.floor is not None
+    return local.floor
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
