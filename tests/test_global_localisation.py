@@ -58,6 +58,19 @@ def test_a_place_clearly_ahead_of_the_current_one_is_a_kidnap() -> None:
     assert search.leader_over(5, PLACES) is None
 
 
+def test_a_pose_found_again_yields_to_any_place_ranked_above_it() -> None:
+    """Recovery's found pose (design §9) asks leader_over with recovered_margin 0: any
+    lead at all, not the kidnap's 0.05, and none while the current place is level."""
+    search = PlaceSearch(LocalisationSettings(search_places_per_frame=100))
+    search.reset(0)
+    search.observe([PlaceScore(p, 0.7, {2: 0.20, 5: 0.21}.get(p, 0.0)) for p in PLACES])
+    assert search.leader_over(2, PLACES) is None  # not a kidnap's lead
+    ahead = search.leader_over(2, PLACES, margin=0.0)
+    assert ahead is not None and ahead.place_id == 5
+    search.observe([PlaceScore(2, 0.7, 0.21)])
+    assert search.leader_over(2, PLACES, margin=0.0) is None  # level: the found pose stands
+
+
 def test_a_loss_is_declared_on_the_fifth_low_frame_in_a_row() -> None:
     loss = LossDetector(LocalisationSettings(loss_output=0.15, loss_frames=5))
     assert [loss.observe(c) for c in (0.1, 0.1, 0.5, 0.1, 0.1, 0.1, 0.1)] == [False] * 7

@@ -129,14 +129,17 @@ class PlaceSearch:
         chosen = fresh or good
         return chosen[0] if chosen else None
 
-    def leader_over(self, current: int, places: list[int]) -> Candidate | None:
-        """A place other than ``current`` leading it by ``search_margin``: the robot is
-        no longer where the estimate says (a kidnap), so recovery goes global at once."""
+    def leader_over(self, current: int, places: list[int], margin: float | None = None
+                    ) -> Candidate | None:
+        """A place other than ``current`` leading it by ``margin`` (``search_margin``
+        unless given): the robot is no longer where the estimate says (a kidnap), so
+        recovery goes global at once."""
         best = self.best(places)
         here = self.scores.get(current)
         if best is None or best.place_id == current or here is None:
             return None
-        return best if best.lead >= here.lead + self.settings.search_margin else None
+        margin = self.settings.search_margin if margin is None else margin
+        return best if best.lead > here.lead + margin else None
 
 
 class LossDetector:

@@ -414,6 +414,14 @@ class Localiser:
             return scored, None
         # mode "recover": steps 1 and 2 of §9.3.2
         if found:
+            # A pose found again where the search ranks another place above this one is a
+            # look-alike's (design §9: in the aliased corridor every such recovery after a
+            # kidnap was wrong, the true place at the top of the search on most).
+            ahead = self.search.leader_over(current, places, self.settings.recovered_margin)
+            if ahead is not None:
+                told = self._tell_apart(grey, ahead.place_id, places)
+                self._start_in(grey, ahead.place_id if told is None else told)
+                return scored, None
             # Found in a place with look-alikes is found in one of them: the view of this
             # place cannot say which, their features can (design §5). Only features that
             # clearly name another place move the robot there; unclear ones do not hold

@@ -150,6 +150,11 @@ class LocalisationSettings:
     search_margin: float = setting(0.05, ge=0.0, le=1.0, doc="lost: a place leading the "
                                    "current one by this goes straight to global "
                                    "relocalisation (the robot was carried off)")
+    recovered_margin: float = setting(0.0, ge=-1.0, le=1.0, doc="recovery steps 1-2: a "
+                                      "pose found again in the current place stands "
+                                      "only while no place of the search leads it by "
+                                      "more than this; else that place is tried "
+                                      "(design §9)")
     lookalike_margin: float = setting(0.1, ge=0.0, le=1.0, doc="a place recognised in a "
                                       "new place's views within this of the new place's "
                                       "own lead is its look-alike: the pair's "
