@@ -419,14 +419,14 @@ class Localiser:
             # kidnap was wrong, the true place at the top of the search on most).
             ahead = self.search.leader_over(current, places, self.settings.recovered_margin)
             if ahead is not None:
-                told = self._tell_apart(grey, ahead.place_id, places)
+                told = self._tell_apart(grey, ahead.place_id, places, at_once=True)
                 self._start_in(grey, ahead.place_id if told is None else told)
                 return scored, None
             # Found in a place with look-alikes is found in one of them: the view of this
             # place cannot say which, their features can (design §5). Only features that
             # clearly name another place move the robot there; unclear ones do not hold
             # the recovery up (waiting cost the office's kidnaps their 10-frame mark).
-            told = self._tell_apart(grey, current, places)
+            told = self._tell_apart(grey, current, places, at_once=True)
             if told is not None and told != current:
                 self._start_in(grey, told)
                 return scored, None
@@ -452,10 +452,11 @@ class Localiser:
         leader = self.search.leader_over(current, places)
         if leader is None:
             return None
-        told = self._tell_apart(grey, leader.place_id, places)
+        told = self._tell_apart(grey, leader.place_id, places, at_once=True)
         return leader.place_id if told is None else told
 
-    def _tell_apart(self, grey: np.ndarray, best: int, places: list[int]) -> int | None:
+    def _tell_apart(self, grey: np.ndarray, best: int, places: list[int],
+                    at_once: bool = False) -> int | None:
         """The search's pick (design §5, thesis §9.5): ``best`` unless places with
         disambiguating features against it stand within ``ambiguity_margin`` of it. Those
         must stay so for ``ambiguity_frames`` frames (None until then: the search goes
@@ -464,7 +465,9 @@ class Localiser:
         seen, or that part their top two by less than ``disambiguation_min_evidence``,
         say little from where the robot stands (0.4 m off a reference their NCCs fall to
         ~0.6 in either place): the decision waits for a clearer view, for at most
-        ``disambiguation_max_wait_frames`` frames, then keeps the lower levels' pick."""
+        ``disambiguation_max_wait_frames`` frames, then keeps the lower levels' pick.
+        ``at_once`` (recovery, which does not wait): the features decide in this frame,
+        and an unclear view keeps the lower levels' pick at once."""
         s = self.settings
         if not s.disambiguation:
             return best
@@ -479,7 +482,7 @@ class Localiser:
             self._ambiguous_frames = 0
             return best  # no look-alike of it stands near: nothing for the features to do
         self._ambiguous_frames += 1
-        if self._ambiguous_frames < s.ambiguity_frames:
+        if self._ambiguous_frames < s.ambiguity_frames and not at_once:
             return None
         contenders = [best, *rivals]
         features: dict[tuple[int, int], Feature] = {}
@@ -496,7 +499,7 @@ class Localiser:
         # Clear: the winner's features are seen (its vote above 0) and part it from the
         # next; with no feature seen the votes differ only by the features' spans.
         clear = first > 0.0 and first - second >= s.disambiguation_min_evidence
-        if not clear and self._ambiguous_frames < s.ambiguity_frames \
+        if not clear and not at_once and self._ambiguous_frames < s.ambiguity_frames \
                 + s.disambiguation_max_wait_frames:
             return None  # the features say little from here: look again on the next frame
         self._ambiguous_frames = 0
