@@ -13,18 +13,11 @@ from tools.eval.lockstep import Run, lockstep_config
 
 OfficeMap = Callable[[Path], dict[str, SE2]]
 
-# `make test` runs the tests on two workers (pytest-xdist, ``--dist loadgroup``). These
-# modules hold a daemon, an emulator or a load to wall-clock limits (a link back within
-# 2 s, an abort within 0.5 s, ten queries a second for a minute): they run one after the
-# other on one worker, never two of them at once on a 2-core machine.
-REALTIME = {"test_daemon_faults", "test_daemon_process", "test_learn_e2e",
-            "test_service_load", "test_xr4000_link"}
-
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    for item in items:
-        if item.path.stem in REALTIME:
-            item.add_marker(pytest.mark.xdist_group("realtime"))
+# `make test` runs the tests on two workers (pytest-xdist, ``--dist loadgroup``). The
+# modules that hold a daemon, an emulator or a load to wall-clock limits (a link back
+# within 2 s, an abort within 0.5 s, ten queries a second for a minute) are in the
+# xdist group "realtime" (their ``pytestmark``): one worker runs them one after the
+# other, never two of them at once on a 2-core machine.
 
 
 @pytest.fixture(scope="session")

@@ -18,6 +18,9 @@ import zenoh
 from tests.daemon_harness import client_session, running_daemon, write_config
 from tests.links import PtyPair, emulator, stop
 
+# Held to wall-clock limits: one worker runs these modules one after another (tests/conftest.py).
+pytestmark = pytest.mark.xdist_group("realtime")
+
 
 class Watcher:
     """Polls the daemon's status (a zenoh query) and listens to its events."""

@@ -9,6 +9,7 @@ import threading
 import time
 from pathlib import Path
 
+import pytest
 import zenoh
 
 from tests.daemon_harness import (
@@ -19,6 +20,9 @@ from tests.daemon_harness import (
     wait_for,
     write_config,
 )
+
+# Held to wall-clock limits: one worker runs these modules one after another (tests/conftest.py).
+pytestmark = pytest.mark.xdist_group("realtime")
 
 
 def test_liveliness_status_ctl_and_clean_stop(tmp_path: Path) -> None:

@@ -34,6 +34,10 @@ from tests.daemon_harness import (
     write_config,
 )
 
+# Held to wall-clock limits: one worker runs these modules one after another (tests/conftest.py).
+pytestmark = pytest.mark.xdist_group("realtime")
+
+
 NO_DRIFT = {"scale_error": 0.0, "heading_bias_rad_per_m": 0.0,
             "random_walk_m_per_sqrt_m": 0.0, "random_walk_rad_per_sqrt_m": 0.0}
 

@@ -22,6 +22,10 @@ from tests.api_schema import check
 from tests.conftest import OfficeMap
 from tests.daemon_harness import REPO, client_session, running_daemon, wait_for, write_config
 
+# Held to wall-clock limits: one worker runs these modules one after another (tests/conftest.py).
+pytestmark = pytest.mark.xdist_group("realtime")
+
+
 ROBOT = "load"
 CAMERA_HZ = 30.0
 FUZZ_CAMERA_HZ = 10.0

@@ -25,6 +25,10 @@ from tools.xr4000.emulator import Emulator, SimSource
 from tools.xr4000.faults import FaultPlan
 from tools.xr4000.transport import CanSide
 
+# Held to wall-clock limits: one worker runs these modules one after another (tests/conftest.py).
+pytestmark = pytest.mark.xdist_group("realtime")
+
+
 CROSS = [(0.5, 0.0), (-0.5, 0.0), (-0.5, 0.0), (0.5, 0.0), (0.0, 0.5), (0.0, -0.5),
          (0.0, -0.5), (0.0, 0.5)]
 
