@@ -323,6 +323,15 @@ def test_placecellctl_map_commands_answer_in_json(tmp_path: Path,
     assert main(["map", "info", str(tmp_path / "map.db"), "--json"]) == EXIT_OK
     info = json.loads(capsys.readouterr().out)
     assert info["places"] == 2 and info["schema_version"] == str(SCHEMA_VERSION)
+    assert info["floor_model"] is False and info["lookalike_pairs"] == 0
+    assert info["places_with_local_space"] == 0  # synthetic places carry no profile
+    histogram = np.zeros((256, 256), np.uint8)
+    histogram[80, 90] = 255
+    with MapStore.open(tmp_path / "map.db", GEOMETRY) as store:  # a floor learned
+        store.save_floor(FloorModel(ColourModel(histogram), 0.2), 1.0)
+    assert main(["map", "info", str(tmp_path / "map.db")]) == EXIT_OK
+    assert "floor model learned, 0 places with a local space profile" in \
+        capsys.readouterr().out
     assert main(["map", "export", str(tmp_path / "map.db"), str(tmp_path / "out"),
                  "--json"]) == EXIT_OK
     assert json.loads(capsys.readouterr().out)["exported"] == 2

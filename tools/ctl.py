@@ -217,13 +217,21 @@ def cmd_map(args: argparse.Namespace) -> int:
                         "geometry_checksum": store.meta("geometry_checksum"),
                         "places": len(graph), "transitions": len(graph.transitions),
                         "bytes": Path(args.file).stat().st_size,
-                        "labels": {p.id: p.label for p in graph.places}}
+                        "labels": {p.id: p.label for p in graph.places},
+                        # design §4-5: what global localisation has to work with
+                        "floor_model": graph.floor is not None,
+                        "places_with_local_space": sum(p.local_space is not None
+                                                       for p in graph.places),
+                        "lookalike_pairs": len(graph.features)}
             if args.json:
                 _print(info)
             else:
                 print(f"{info['file']}: map schema {info['schema_version']}, geometry "
                       f"{info['geometry_checksum']}, {info['places']} places, "
-                      f"{info['transitions']} transitions (both ways), {info['bytes']} bytes")
+                      f"{info['transitions']} transitions (both ways), {info['bytes']} bytes; "
+                      f"floor model {'learned' if info['floor_model'] else 'none'}, "
+                      f"{info['places_with_local_space']} places with a local space profile, "
+                      f"{info['lookalike_pairs']} look-alike pairs with features")
             return EXIT_OK
         if args.map_command == "export":
             with MapStore.open(args.file, None, readonly=True) as store:
