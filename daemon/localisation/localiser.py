@@ -417,10 +417,9 @@ class Localiser:
             # A pose found again where the search ranks another place above this one is a
             # look-alike's (design §9: in the aliased corridor every such recovery after a
             # kidnap was wrong, the true place at the top of the search on most).
-            ahead = self.search.leader_over(current, places, self.settings.recovered_margin)
+            ahead = self._leader(grey, current, places, self.settings.recovered_margin)
             if ahead is not None:
-                told = self._tell_apart(grey, ahead.place_id, places, at_once=True)
-                self._start_in(grey, ahead.place_id if told is None else told)
+                self._start_in(grey, ahead)
                 return scored, None
             # Found in a place with look-alikes is found in one of them: the view of this
             # place cannot say which, their features can (design §5). Only features that
@@ -445,11 +444,13 @@ class Localiser:
                     self._begin_search(stamp_ns, rejected={current}, keep_episode=True)
         return scored, None
 
-    def _leader(self, grey: np.ndarray, current: int, places: list[int]) -> int | None:
-        """The place the search finds clearly ahead of ``current`` (a kidnap: recovery
-        goes global at once), told apart from its look-alikes when their features are
-        clear (the leader itself while they are not); None while no place leads."""
-        leader = self.search.leader_over(current, places)
+    def _leader(self, grey: np.ndarray, current: int, places: list[int],
+                margin: float | None = None) -> int | None:
+        """The place the search finds ahead of ``current`` by ``margin`` (by default
+        ``search_margin``: clearly, a kidnap, recovery goes global at once), told apart
+        from its look-alikes when their features are clear (the leader itself while they
+        are not); None while no place leads."""
+        leader = self.search.leader_over(current, places, margin)
         if leader is None:
             return None
         told = self._tell_apart(grey, leader.place_id, places, at_once=True)
