@@ -178,6 +178,7 @@ def test_version_2_map_keeps_its_places_and_gains_background_estimates(tmp_path:
     db = sqlite3.connect(path)  # what a version 2 file holds: no background_estimate
     db.execute("ALTER TABLE places DROP COLUMN background_estimate")
     db.execute("ALTER TABLE places DROP COLUMN signature")
+    db.execute("ALTER TABLE places DROP COLUMN background_cross")
     db.execute("DROP TABLE resume")
     db.execute("DROP TABLE features")
     db.execute("DROP TABLE floor")
@@ -199,6 +200,9 @@ def test_version_2_map_keeps_its_places_and_gains_background_estimates(tmp_path:
         assert store.saved_pose() is None  # v4's resume table, empty
         assert store.features() == []  # v5's features table, empty
         assert store.floor() is None  # v6's floor table, empty
+        # v7's backgrounds in the other places' views, measured by the mapper at start
+        crosses = [p.background_cross for p in store.load().places]
+        assert all(c is not None and -1.0 <= c <= 1.0 for c in crosses), crosses
 
 
 def test_the_saved_pose_survives_a_reopen_and_bad_ones_are_refused(tmp_path: Path) -> None:
@@ -387,6 +391,7 @@ def test_version_4_map_gains_the_features_table_and_keeps_the_rest(tmp_path: Pat
     db = sqlite3.connect(path)
     db.execute("DROP TABLE features")
     db.execute("DROP TABLE floor")
+    db.execute("ALTER TABLE places DROP COLUMN background_cross")
     db.execute("UPDATE meta SET value = '4' WHERE key = 'schema_version'")
     db.commit()
     db.close()
@@ -394,7 +399,7 @@ def test_version_4_map_gains_the_features_table_and_keeps_the_rest(tmp_path: Pat
     fa = Feature(40, 8, rng.integers(0, 256, (24, 24)).astype(np.uint8), 0.95, 0.31)
     fb = Feature(600, 16, rng.integers(0, 256, (16, 16)).astype(np.uint8), 0.9, 0.42)
     with MapStore.open(path, GEOMETRY) as store:
-        assert store.meta("schema_version") == str(SCHEMA_VERSION) == "6"
+        assert store.meta("schema_version") == str(SCHEMA_VERSION) == "7"
         assert [p.label for p in store.load().places] == ["dock", "door"]
         assert store.transition_count() == 2 and store.saved_pose() is not None
         assert store.features() == []
@@ -414,13 +419,14 @@ def test_the_floor_model_is_kept_with_the_map_and_a_damaged_one_named(tmp_path: 
     _two_places(path).close()
     db = sqlite3.connect(path)
     db.execute("DROP TABLE floor")
+    db.execute("ALTER TABLE places DROP COLUMN background_cross")
     db.execute("UPDATE meta SET value = '5' WHERE key = 'schema_version'")
     db.commit()
     db.close()
     histogram = np.zeros((256, 256), np.uint8)
     histogram[80, 90] = 255
     with MapStore.open(path, GEOMETRY) as store:
-        assert store.meta("schema_version") == "6" and store.floor() is None
+        assert store.meta("schema_version") == "7" and store.floor() is None
         store.save_floor(FloorModel(ColourModel(histogram), 0.2), 10.0)
         store.save_floor(FloorModel(ColourModel(histogram), 0.3), 20.0)
     with MapStore.open(path, GEOMETRY) as store:
@@ -436,3 +442,28 @@ def test_the_floor_model_is_kept_with_the_map_and_a_damaged_one_named(tmp_path: 
         store.floor()
     with pytest.raises(ValueError, match="gradient threshold is positive"):
         FloorModel(ColourModel(histogram), 0.0)
+
+
+def test_version_6_map_gains_the_backgrounds_in_the_other_places_views(tmp_path: Path
+                                                                       ) -> None:
+    """Schema 7 (design §9): each place's background in the other places' views; a
+    version 6 file keeps its places, the column empty until the daemon's mapper
+    measures it from the stored panoramas (a read-only map is left as it is)."""
+    path = tmp_path / "v6.db"
+    _two_places(path).close()
+    db = sqlite3.connect(path)
+    db.execute("ALTER TABLE places DROP COLUMN background_cross")
+    db.execute("UPDATE meta SET value = '6' WHERE key = 'schema_version'")
+    db.commit()
+    db.close()
+    with MapStore.open(path, GEOMETRY) as store:
+        assert store.meta("schema_version") == "7"
+        assert [p.background_cross for p in store.load().places] == [None, None]
+    with MapStore.open(path, GEOMETRY, readonly=True) as store:
+        Mapper(store, OdometryNoiseSettings())
+        assert [p.background_cross for p in store.load().places] == [None, None]
+    with MapStore.open(path, GEOMETRY) as store:
+        mapper = Mapper(store, OdometryNoiseSettings())
+        stored = [p.background_cross for p in store.load().places]
+        assert all(c is not None and -1.0 <= c <= 1.0 for c in stored), stored
+        assert [p.background_cross for p in mapper.graph.places] == stored

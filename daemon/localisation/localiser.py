@@ -48,6 +48,7 @@ from daemon.localisation.place_switching import CycleClosure, PlaceSwitcher, rel
 from daemon.localisation.sensor_models import make_model
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.acquisition import AcquisitionDecision, BackgroundMeter, PlaceAcquisition
+from daemon.mapping.backgrounds import Levels, levels, search_background
 from daemon.mapping.odometry_chain import OdometryChain
 from daemon.mapping.place import Place
 from daemon.mapping.settings import AcquisitionSettings, OdometryNoiseSettings
@@ -122,6 +123,8 @@ class Localiser:
         self._watched: tuple[int, PreparedTemplates] | None = None
         self._watch_next: tuple[int, PreparedTemplates] | None = None  # from other threads
         self._known: dict[int, KnownPlace] = {}
+        # The backgrounds' levels and the places they were made over (design §9).
+        self._levels: tuple[dict[int, KnownPlace], Levels | None] | None = None
         self._links: dict[int, dict[int, UncertainSE2]] = {}  # from -> to -> T_from_to
         self._lock = threading.Lock()  # the map and requests arrive from other threads
         self._meters: list[BackgroundMeter] = []  # places being left behind
@@ -347,12 +350,18 @@ class Localiser:
         when it was learned, else the default (§7.1, design §9). Tracking between
         places compares a place with its neighbours, where the default measured best
         (cyclic, office 1: 0.013 m mean against 0.066 with the estimates); the global
-        search compares every place with every other, where the estimates are needed."""
+        search compares every place with every other, where the estimates are needed —
+        the cross estimates on the map's own-view level (daemon/mapping/backgrounds.py)."""
         if known.background is not None:
             return known.background
-        estimate = known.place.background_estimate
-        return self.settings.background_lrp if estimate is None or not estimated \
-            else estimate
+        if not estimated:
+            return self.settings.background_lrp
+        known_places = self._known
+        if self._levels is None or self._levels[0] is not known_places:
+            # The map's levels, made again once it changes (know_place).
+            self._levels = (known_places, levels(k.place for k in known_places.values()))
+        estimate = search_background(known.place, self._levels[1])
+        return self.settings.background_lrp if estimate is None else estimate
 
     # ------------------------------------------------------------------ global (§9)
     def _supervise(self, prepare: Callable[[], PreparedPanorama], grey: np.ndarray,

@@ -28,7 +28,9 @@ class Place:
     ``id`` is 0 until the map file assigns one. ``background_lrp`` is the LRP the place's
     landmark set settles at away from it (§7.1), None until measured;
     ``background_estimate`` the same level estimated when the place is learned
-    (:func:`estimate_background`), used until it is measured; ``signature`` the
+    (:func:`estimate_background`), used until it is measured; ``background_cross`` the
+    mean LRP of its landmarks in other places' reference views (daemon/mapping/
+    backgrounds.py; None until the map holds another place); ``signature`` the
     reference panorama's rotation-invariant signature (daemon/vision/signature.py), the
     cheap cue that orders the global search (None in maps made before it); ``local_space``
     holds the 16-bin local space profile of chapter 5 once it is measured (None before).
@@ -40,6 +42,7 @@ class Place:
     created_unix_s: float = 0.0
     background_lrp: float | None = None
     background_estimate: float | None = None
+    background_cross: float | None = None
     signature: np.ndarray | None = None  # the reference panorama's azimuth signature
     local_space: np.ndarray | None = None
     id: int = 0

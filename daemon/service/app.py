@@ -315,6 +315,8 @@ class Daemon:
             added = self.mapper.graph.neighbours(p.id)
             if localiser is not None:
                 localiser.place_learned(p, added)
+                for place in outcome.rebackgrounded:
+                    localiser.know_place(place)
                 for pair in self.mapper.graph.features:
                     if p.id in (pair.a_id, pair.b_id):
                         localiser.know_features(pair)
@@ -736,6 +738,7 @@ def _place_body(place: Place, out: list[Transition]) -> dict[str, Any]:
     return {"id": place.id, "label": place.label, "created_unix_s": place.created_unix_s,
             "background_lrp": place.background_lrp,
             "background_estimate": place.background_estimate,
+            "background_cross": place.background_cross,
             "landmarks": [{"row": lm.row, "col": lm.col, "bearing": round(lm.bearing, 6),
                            "depth_m": finite(lm.depth),
                            "depth_sigma_m": finite(math.sqrt(lm.covariance[0, 0]))

@@ -138,6 +138,8 @@ class LearnOutcome:
     error: ErrorCode | None
     message: str
     lookalikes: list[int] = field(default_factory=list)  # places it was told apart from
+    # Places whose background in other places' views it changed (itself among them).
+    rebackgrounded: list[Place] = field(default_factory=list)
 
 
 class LearnJob:
@@ -216,10 +218,12 @@ class LearnJob:
             outcome = LearnOutcome(stored, None, "")
             self._reply("progress", {"phase": "lookalikes", "fraction": 1.0})
             try:
+                changed = self.mapper.measure_cross_backgrounds(stored.id)
                 pairs = self.mapper.learn_features(stored.id, tbl.views, self.localisation)
-                outcome = LearnOutcome(stored, None, "", [p.b_id for p in pairs])
-            except Exception:  # noqa: BLE001 - the place is stored; features can be redone
-                log.exception("place %d: its look-alikes' features were not found", stored.id)
+                outcome = LearnOutcome(stored, None, "", [p.b_id for p in pairs], changed)
+            except Exception:  # noqa: BLE001 - the place is stored; cues can be redone
+                log.exception("place %d: its backgrounds or look-alikes' features were not "
+                              "found", stored.id)
             self._reply("result", {
                 "place": {"id": stored.id, "label": stored.label,
                           "landmarks": stored.landmark_count,

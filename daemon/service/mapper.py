@@ -18,6 +18,7 @@ import time
 import numpy as np
 
 from daemon.localisation.settings import LocalisationSettings
+from daemon.mapping.backgrounds import views_of
 from daemon.mapping.embedding import embed
 from daemon.mapping.graph import TopologicalMap
 from daemon.mapping.lookalikes import MappedPlace, lookalikes, pair_features
@@ -28,7 +29,7 @@ from daemon.mapping.transition import Transition, TransitionSource
 from daemon.store.sqlite_store import MapStore, PlaceSummary
 from daemon.vision.disambiguation import PairFeatures
 from daemon.vision.floor import FloorModel
-from daemon.vision.recognition import PreparedTemplates
+from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
 from kernel.panorama import to_grey
 from kernel.se2 import SE2, UncertainSE2
 from kernel.types import Odometry
@@ -90,6 +91,9 @@ class Mapper:
                 self.graph.add_place(dataclasses.replace(full, reference_panorama=None))
                 log.info("place %d: background LRP estimated at %.3f", place.id,
                          full.background_estimate)
+        missing = [p.id for p in self.graph.places if p.background_cross is None]
+        if missing and len(self.graph) > 1:
+            self._store_cross_backgrounds(missing)
 
     # ------------------------------------------------------------ odometry
     def on_odometry(self, samples: list[Odometry]) -> None:
@@ -162,6 +166,47 @@ class Mapper:
             self._last_place, self._chain, self._pending = stored.id, self._pending, None
         self.reembed()
         return stored, added
+
+    def measure_cross_backgrounds(self, place_id: int) -> list[Place]:
+        """The backgrounds in other places' views (daemon/mapping/backgrounds.py) that a
+        place just learned brings: its own, and those of the places whose views it joins
+        (while the map is smaller than CROSS_VIEWS + 1 places); stored and in the map.
+        Returns the places whose background changed (a read-only map: none)."""
+        if self.store.readonly:
+            return []
+        with self._lock:
+            ids = [p.id for p in self.graph.places]
+            changed = [q for q in ids if q == place_id or place_id in views_of(q, ids)
+                       or self.graph.place(q).background_cross is None]
+        if len(ids) < 2:
+            return []
+        return self._store_cross_backgrounds(changed)
+
+    def _store_cross_backgrounds(self, place_ids: list[int]) -> list[Place]:
+        """Each place's mean LRP in its views (views_of), measured, stored and in the
+        map: each view's panorama is read and prepared once for all the places."""
+        with self._lock:
+            ids = [p.id for p in self.graph.places]
+            templates = {q: PreparedTemplates.of(self.graph.place(q).landmarks.templates())
+                         for q in place_ids}
+        views = {q: views_of(q, ids) for q in place_ids}
+        sums = dict.fromkeys(place_ids, 0.0)
+        matcher = FastMatcher()
+        for v in sorted({v for vs in views.values() for v in vs}):
+            users = [q for q in place_ids if v in views[q]]
+            pano = PreparedPanorama.of(to_grey(self.store.reference_panorama(v)))
+            for q, lrp in zip(users, matcher.lrps(pano, [templates[q] for q in users]),
+                              strict=True):
+                sums[q] += lrp
+        values = {q: sums[q] / len(views[q]) for q in place_ids if views[q]}
+        with self._lock:
+            self.store.set_cross_backgrounds(values)
+            changed = [dataclasses.replace(self.graph.place(q), background_cross=value)
+                       for q, value in values.items()]
+            for place in changed:
+                self.graph.add_place(place)
+        log.info("%d places: backgrounds in other places' views measured", len(changed))
+        return changed
 
     def learn_features(self, place_id: int, views: list[np.ndarray],
                        settings: LocalisationSettings) -> list[PairFeatures]:

@@ -107,6 +107,7 @@ def _place_json(place: Place) -> dict[str, Any]:
         "id": place.id, "label": place.label, "created_unix_s": place.created_unix_s,
         "background_lrp": place.background_lrp,
         "background_estimate": place.background_estimate,
+        "background_cross": place.background_cross,
         "signature": None if place.signature is None else place.signature.tolist(),
         "local_space": None if place.local_space is None else place.local_space.tolist(),
         "width": place.landmarks.width, "margin": place.landmarks.margin,
@@ -145,6 +146,8 @@ def _place_from_json(d: dict[str, Any], src: Path) -> Place:
                  else float(d["background_lrp"]),
                  background_estimate=None if d.get("background_estimate") is None
                  else float(d["background_estimate"]),
+                 background_cross=None if d.get("background_cross") is None
+                 else float(d["background_cross"]),
                  signature=None if d.get("signature") is None
                  else np.array(d["signature"], dtype=float),
                  local_space=None if ls is None else np.array(ls, dtype=float),

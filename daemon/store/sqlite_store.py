@@ -37,7 +37,7 @@ from kernel.se2 import SE2, UncertainSE2
 
 log = logging.getLogger(__name__)
 
-SCHEMA_VERSION = 6
+SCHEMA_VERSION = 7
 APPLICATION = "placecell-map"
 
 _SCHEMA = """
@@ -52,6 +52,7 @@ CREATE TABLE places (
     background_lrp REAL,
     background_estimate REAL,           -- v3: from the reference panorama, NULL if not made
     signature      BLOB,                -- v3: float64, daemon/vision/signature.py
+    background_cross REAL,              -- v7: in the other places' views, NULL if not made
     landmark_count INTEGER NOT NULL,
     landmarks      BLOB NOT NULL,       -- daemon/store/codec.py
     panorama       BLOB NOT NULL,       -- reference panorama, lossless PNG
@@ -100,7 +101,7 @@ _SCHEMA += ";" + _RESUME_TABLE + ";" + _FEATURES_TABLE + ";" + _FLOOR_TABLE
 
 
 _PLACE_COLUMNS = ("id, label, created_unix_s, background_lrp, landmarks, local_space, "
-                  "digest, background_estimate, signature")
+                  "digest, background_estimate, signature, background_cross")
 
 
 @dataclass(frozen=True)
@@ -248,7 +249,7 @@ class MapStore:
         return TopologicalMap(places, self.transitions(), self.features(), self.floor())
 
     def _decode_place(self, row: Sequence[Any]) -> Place:
-        pid, label, created, background, lm_blob, ls_blob, stored, estimate, sig = row
+        pid, label, created, background, lm_blob, ls_blob, stored, estimate, sig, cross = row
         where = f"{self.path}: place {pid}"
         if codec.digest(lm_blob, ls_blob) != stored:
             raise MapStoreError(f"{where} is damaged (its bytes do not match their digest)")
@@ -257,6 +258,7 @@ class MapStore:
             return Place(landmarks, None, label=str(label), created_unix_s=float(created),
                          background_lrp=None if background is None else float(background),
                          background_estimate=None if estimate is None else float(estimate),
+                         background_cross=None if cross is None else float(cross),
                          signature=codec.decode_vector(sig),
                          local_space=codec.decode_vector(ls_blob), id=int(pid))
         except ValueError as e:
@@ -311,6 +313,14 @@ class MapStore:
             self._db.execute("UPDATE places SET background_estimate = ?, signature = ? "
                              "WHERE id = ?", (float(background_estimate),
                                               codec.encode_vector(signature), place_id))
+
+    def set_cross_backgrounds(self, values: dict[int, float]) -> None:
+        """Places' background LRPs in the other places' views (design §9), in one
+        transaction."""
+        self._writable()
+        with self._lock, _transaction(self._db):
+            self._db.executemany("UPDATE places SET background_cross = ? WHERE id = ?",
+                                 [(float(v), pid) for pid, v in values.items()])
 
     def save_pose(self, saved: SavedPose) -> None:
         """Replace the saved pose (one row; a crash keeps the previous one)."""
@@ -391,11 +401,13 @@ class MapStore:
         ls = codec.encode_vector(place.local_space)
         cur = self._db.execute(
             "INSERT INTO places(id, label, created_unix_s, background_lrp, "
-            "background_estimate, signature, landmark_count, landmarks, panorama, local_space, "
-            "digest, panorama_digest) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            "background_estimate, signature, background_cross, landmark_count, landmarks, "
+            "panorama, local_space, digest, panorama_digest) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             (place.id if keep_id else None, place.label, place.created_unix_s,
              place.background_lrp, place.background_estimate,
-             codec.encode_vector(place.signature), place.landmark_count, lm, pano, ls,
+             codec.encode_vector(place.signature), place.background_cross,
+             place.landmark_count, lm, pano, ls,
              codec.digest(lm, ls), codec.digest(pano)))
         return int(cur.lastrowid or 0)
 
@@ -524,7 +536,9 @@ def _migrate(db: sqlite3.Connection, p: Path, version: int) -> None:
     the daemon's mapper makes them from the stored reference panoramas); 2 and 3 gain
     the resume table (no pose saved); 2 to 4 gain the features table (none yet: the
     daemon's mapper finds the look-alike pairs and their features); 2 to 5 gain the
-    floor table (no floor model: the localiser learns one from its first colour frame)."""
+    floor table (no floor model: the localiser learns one from its first colour frame);
+    2 to 6 gain places.background_cross (NULL: the daemon's mapper measures it from the
+    stored reference panoramas)."""
     with _transaction(db):
         if version == 2:
             db.execute("ALTER TABLE places ADD COLUMN background_estimate REAL")
@@ -535,6 +549,8 @@ def _migrate(db: sqlite3.Connection, p: Path, version: int) -> None:
             db.execute(_FEATURES_TABLE)
         if version in (2, 3, 4, 5):
             db.execute(_FLOOR_TABLE)
+        if version in (2, 3, 4, 5, 6):
+            db.execute("ALTER TABLE places ADD COLUMN background_cross REAL")
             db.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'",
                        (str(SCHEMA_VERSION),))
         if version == 1:

@@ -164,6 +164,8 @@ class Run:
                   local_space=self.localiser.place_profile(tbl.reference_panorama)), link[0])
         place = dataclasses.replace(stored, reference_panorama=None)
         self.localiser.place_learned(place, added)  # as the daemon does
+        for changed in self.mapper.measure_cross_backgrounds(place.id):
+            self.localiser.know_place(changed)
         for pair in self.mapper.learn_features(place.id, tbl.views, self.cfg.localisation):
             self.localiser.know_features(pair)
         self.references[place.id] = SE2.of(truth[0])

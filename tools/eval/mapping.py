@@ -163,6 +163,8 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path
                 local_space=localiser.place_profile(tbl.reference_panorama)), link[0])
             refs.append(ref)
             localiser.place_learned(stored, added)  # as the daemon does after a learn job
+            for changed in mapper.measure_cross_backgrounds(stored.id):
+                localiser.know_place(changed)
             retry_at_m = None
             last_pose = robot.true_pose()
         places = mapper.graph.places
