@@ -6,7 +6,7 @@ The same tour as ``placecell-eval global`` (tools/eval/global_tour.py), scored b
 cue alone: on every frame the places whose signature similarity is within the cue
 margin of the best. Metrics: ``inclusion_extra_cue``, ``mean_set_fraction_extra_cue``
 (at ``[localisation] cue_margin``) and ``by_cue_margin``; the local space set (the
-thesis's own cue, margin B = 0.075): ``inclusion``, ``mean_set_fraction``,
+thesis's own cue, margin B = 0.1): ``inclusion``, ``mean_set_fraction``,
 ``by_local_margin``, and both sets' common part ``inclusion_combined``,
 ``mean_set_fraction_combined``; ``places``, ``frames``. ``--floor carpet`` (or another
 of hal/sim/worldgen.py FLOORS) gives the world a hard floor.

@@ -25,7 +25,9 @@ place's; ``person_match_change_max`` is the largest drop of its match
 (daemon/vision/local_space.py) while a person walks past 1 m in front (8 frames, the
 grid running on); ``move_1m_match_change_min`` / ``_median`` the drop for the profile
 from a fresh grid after 10 frames 1 m away (free direction chosen at random), with
-``move_1m_over_0p1`` the share of poses where it exceeds 0.1. The profile is in metres
+``move_1m_over_0p1`` the share of poses where it exceeds 0.1, and
+``move_1m_over_0p1_true_floor`` the same between the true floors of the two poses (what
+a perfect floor detector gives: the profile's own limit). The profile is in metres
 (``profile_m``, capped at 5 m); the same with ``_rows`` for SPEC §4's rows.
 """
 
@@ -176,6 +178,10 @@ def _floor_run(eye: _Eye, world: World, learned: FloorModel,
                 fresh.update(eye.view(moved), model)
             for unit, drop in _drops(_profiles(fresh.mask(), distance), place).items():
                 out.setdefault(f"move_drop_{unit}", []).append(drop)
+            # The same with the true floor at both poses: what a perfect detector gives
+            for unit, drop in _drops(_profiles(eye.renderer.floor_mask(moved), distance),
+                                     _profiles(truth, distance)).items():
+                out.setdefault(f"move_truth_drop_{unit}", []).append(drop)
     return out
 
 
@@ -224,7 +230,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                                                    4),
             f"move_1m_match_change_min{tag}": round(float(np.nanmin(moves)), 4),
             f"move_1m_match_change_median{tag}": round(float(np.nanmedian(moves)), 4),
-            f"move_1m_over_0p1{tag}": round(float(np.mean(moves > 0.1)), 4)})
+            f"move_1m_over_0p1{tag}": round(float(np.mean(moves > 0.1)), 4),
+            f"move_1m_over_0p1_true_floor{tag}": round(float(np.mean(np.array(
+                pooled.get(f"move_truth_drop_{unit}", [np.nan])) > 0.1)), 4)})
     metrics.update(poses=len(poses), floors=len(names), by_floor=by_floor)
     return {
         "world": {"kind": args.world_kind, "seed": args.world_seed},
