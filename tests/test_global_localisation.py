@@ -4,7 +4,7 @@ crafted recognition scores."""
 from __future__ import annotations
 
 from daemon.localisation.belief import PlaceScore
-from daemon.localisation.global_localisation import LossDetector, PlaceSearch
+from daemon.localisation.global_localisation import LeadWatch, LossDetector, PlaceSearch
 from daemon.localisation.settings import LocalisationSettings
 
 PLACES = list(range(1, 51))
@@ -69,6 +69,26 @@ def test_a_pose_found_again_yields_to_any_place_ranked_above_it() -> None:
     assert ahead is not None and ahead.place_id == 5
     search.observe([PlaceScore(2, 0.7, 0.21)])
     assert search.leader_over(2, PLACES, margin=0.0) is None  # level: the found pose stands
+
+
+def test_a_place_leading_the_search_three_frames_in_a_row_is_a_loss() -> None:
+    """Tracking (design §9): the background search's leader by search_margin, three
+    search frames in a row; a frame without the search, or level, breaks the run."""
+    search = PlaceSearch(LocalisationSettings(search_places_per_frame=100))
+    watch = LeadWatch(LocalisationSettings(led_frames=3, search_margin=0.05))
+    search.reset(0)
+
+    def frame(lead_of_5: float, searched: bool = True) -> bool:
+        search.observe([PlaceScore(p, 0.7, {2: 0.10, 5: lead_of_5}.get(p, 0.0))
+                        for p in PLACES])
+        return watch.observe(search, 2, PLACES, searched)
+
+    assert [frame(0.2), frame(0.2), frame(0.2, searched=False)] == [False] * 3
+    assert [frame(0.2), frame(0.14)] == [False, False]  # 0.04 ahead: not a lead
+    assert [frame(0.2), frame(0.2), frame(0.2)] == [False, False, True]
+    watch.reset()
+    never = LeadWatch(LocalisationSettings(led_frames=0))
+    assert not any(never.observe(search, 2, PLACES, True) for _ in range(10))
 
 
 def test_a_loss_is_declared_on_the_fifth_low_frame_in_a_row() -> None:

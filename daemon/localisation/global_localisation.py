@@ -10,8 +10,10 @@ current place and its neighbours (§9.4.2; without a cue, every place). The othe
 still recognised on later frames while no place is named (nothing is dropped for good).
 :class:`LossDetector` declares a loss when the raw sensor-model output at the estimate,
 over the place's landmarks usable from there (``LocalResult.support``), stays below a
-threshold for a number of frames in a row (§9.3.1). The recovery that follows, in the
-order of §9.3.2, is the localiser's (daemon/localisation/localiser.py).
+threshold for a number of frames in a row (§9.3.1); :class:`LeadWatch` declares one
+while the sensor output still holds, when another place leads the current one in the
+background search for a few frames in a row. The recovery that follows, in the order of
+§9.3.2, is the localiser's (daemon/localisation/localiser.py).
 """
 
 from __future__ import annotations
@@ -165,3 +167,25 @@ class LossDetector:
     def suspicious(self) -> bool:
         """At least one low frame: worth searching the map in the background."""
         return self.low_frames > 0
+
+
+class LeadWatch:
+    """Tracking: another place leading the current one in the background search by
+    ``search_margin`` for ``led_frames`` search frames in a row is a loss at once — the
+    robot carried off, or tracked in a place it has left (design §9: office 2 tracked
+    one 24 frames in a place two behind, the true place leading by 0.08-0.14)."""
+
+    def __init__(self, settings: LocalisationSettings) -> None:
+        self.settings = settings
+        self.frames = 0  # search frames in a row another place led
+
+    def observe(self, search: PlaceSearch, current: int, places: list[int],
+                searched: bool) -> bool:
+        """``searched``: the search ran in this frame (a frame without it breaks the
+        run). True once the run reaches ``led_frames``."""
+        led = searched and search.leader_over(current, places) is not None
+        self.frames = self.frames + 1 if led else 0
+        return 0 < self.settings.led_frames <= self.frames
+
+    def reset(self) -> None:
+        self.frames = 0

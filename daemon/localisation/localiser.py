@@ -41,7 +41,7 @@ from daemon.localisation.belief import (
     LocalisationEvent,
     PlaceScore,
 )
-from daemon.localisation.global_localisation import LossDetector, PlaceSearch
+from daemon.localisation.global_localisation import LeadWatch, LossDetector, PlaceSearch
 from daemon.localisation.local_positioning import LocalResult, PlaceTracker
 from daemon.localisation.odometry import OdometryBuffer, relative_motion
 from daemon.localisation.place_switching import CycleClosure, PlaceSwitcher, reliable
@@ -144,6 +144,7 @@ class Localiser:
         self.mode: Mode = "search"
         self.search = PlaceSearch(self.settings)
         self.loss = LossDetector(self.settings)
+        self.lead_watch = LeadWatch(self.settings)
         self._relocalise_requested = False
         self._step = 0  # the recovery step under way (mode "recover")
         self._mode_frames = 0  # frames in this mode or recovery step
@@ -403,12 +404,16 @@ class Localiser:
             self.search.reset(None)  # confident again: no background search
         found = self._recovered(local)
         if self.mode == "track":
-            if not lost_now:
+            led = self.lead_watch.observe(self.search, current, places, bool(scored))
+            if not lost_now and not led:
                 return scored, None
             self._episode = (stamp_ns, self._frames)
+            s = self.settings
             event = LocalisationEvent("lost", current, f"sensor output below "
-                                      f"{self.settings.loss_output} for "
-                                      f"{self.settings.loss_frames} frames")
+                                      f"{s.loss_output} for {s.loss_frames} frames"
+                                      if lost_now else f"another place led the search "
+                                      f"by {s.search_margin} for {s.led_frames} frames")
+            self.lead_watch.reset()
             leader = self._leader(grey, current, places)
             if leader is not None:
                 self._start_in(grey, leader)

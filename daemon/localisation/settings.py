@@ -151,6 +151,11 @@ class LocalisationSettings:
     search_margin: float = setting(0.05, ge=0.0, le=1.0, doc="lost: a place leading the "
                                    "current one by this goes straight to global "
                                    "relocalisation (the robot was carried off)")
+    led_frames: int = setting(3, ge=0, le=1000, doc="tracking: a place of the background "
+                              "search leading the current one by search_margin this "
+                              "many frames in a row is a loss at once, the robot "
+                              "carried off or tracked in the wrong place (design §9; "
+                              "0: only the sensor output declares a loss)")
     recovered_margin: float = setting(0.0, ge=-1.0, le=1.0, doc="recovery steps 1-2: a "
                                       "pose found again in the current place stands "
                                       "only while no place of the search leads it by "
