@@ -77,3 +77,29 @@ def test_background_meter_takes_the_settled_median() -> None:
             values.append(v)
             break
     assert values == [pytest.approx(0.63)]
+
+
+def test_an_early_decision_estimates_the_background_as_the_places_around() -> None:
+    """With backgrounds measured nearby (0.72), the next place is learned while the LRP
+    still stands within coverage_margin of them; the LRP there has not settled, so the
+    first estimate of the place's background is the measured one, not the LRP."""
+    acq = PlaceAcquisition(SETTINGS)
+    acq.reset(5, expected_background=0.72)
+    for i in range(1, 2000):
+        x = 0.02 * i
+        decision = acq.observe(_lrp(x, background=0.74), Odometry(x, 0.0, 0.0, i, i))
+        if decision is not None:
+            break
+    assert decision is not None and decision.place_id == 5
+    assert acq.smoothed_lrp is not None and acq.smoothed_lrp > 0.72
+    assert decision.background_lrp == pytest.approx(0.72)
+    # Where the LRP has settled (the thesis's rule), the estimate is the LRP itself.
+    acq.reset(6)
+    for i in range(1, 2000):
+        x = 0.02 * i
+        decision = acq.observe(_lrp(x, background=0.74), Odometry(x, 0.0, 0.0, i, i))
+        if decision is not None:
+            break
+    assert decision is not None and decision.place_id == 6
+    assert decision.background_lrp == pytest.approx(acq.smoothed_lrp)
+    assert decision.background_lrp == pytest.approx(0.74, abs=0.02)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from daemon.localisation.belief import PlaceScore
-from daemon.localisation.place_switching import CycleClosure, PlaceSwitcher
+from daemon.localisation.place_switching import CycleClosure, PlaceSwitcher, places_near
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.odometry_chain import OdometryChain
 from daemon.mapping.settings import OdometryNoiseSettings
@@ -130,3 +130,22 @@ def test_a_place_the_graph_puts_near_is_checked_every_time_and_handed_over_to() 
     # Not when the graph does not put it near (it is not in ``near``).
     assert sw.decide(1, [2], scores(p1=0.10, p2=0.0, p7=0.05), {1: 0.9, 2: 1.4, 7: 0.4}
                      ) is None
+
+
+def test_acquisition_takes_back_only_places_the_map_puts_near_the_estimate() -> None:
+    """A corridor of places 1 m apart: from an estimate 0.5 m past place 1, places 0-3
+    are within 3 m through the chain of transitions, and the far end (a look-alike of
+    place 1 in an aliased corridor) is not; a path's drift widens the gate."""
+    step = UncertainSE2(SE2(1.0, 0.0, 0.0), np.diag([1e-4, 1e-4, 1e-6]))
+    through = {0: step.inverse()}  # T_1_p: place 0 behind place 1, 2-19 ahead
+    here = UncertainSE2(SE2(), np.zeros((3, 3)))
+    for pid in range(2, 20):
+        here = here.compose(step)
+        through[pid] = here
+    assert places_near(1, (0.5, 0.0, 0.0), through, within_m=3.0) == {0, 1, 2, 3, 4}
+    # Beyond the gate ahead, the same chain with a drift of 2 m (1 sigma) at place 6.
+    loose = dict(through)
+    loose[6] = UncertainSE2(through[6].mean, np.diag([2.0, 2.0, 0.01]))
+    assert 6 in places_near(1, (0.5, 0.0, 0.0), loose, within_m=3.0)
+    # The current place itself only while the estimate is within the gate of it.
+    assert 1 not in places_near(1, (4.0, 0.0, 0.0), through, within_m=3.0)

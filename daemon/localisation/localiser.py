@@ -44,7 +44,7 @@ from daemon.localisation.belief import (
 from daemon.localisation.global_localisation import LeadWatch, LossDetector, PlaceSearch
 from daemon.localisation.local_positioning import LocalResult, PlaceTracker
 from daemon.localisation.odometry import OdometryBuffer, relative_motion
-from daemon.localisation.place_switching import CycleClosure, PlaceSwitcher, reliable
+from daemon.localisation.place_switching import CycleClosure, PlaceSwitcher, places_near, reliable
 from daemon.localisation.sensor_models import make_model
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.acquisition import AcquisitionDecision, BackgroundMeter, PlaceAcquisition
@@ -798,6 +798,18 @@ class Localiser:
         measured = sorted(k.background for k in self._known.values() if k.background is not None)
         return measured[len(measured) // 2] if measured else None
 
+    def _near_estimate(self, within_m: float) -> set[int] | None:
+        """The places the map's transitions put within ``within_m`` of the tracked
+        estimate, and those no path of transitions reaches (nothing to rule them out);
+        None: not tracking, nothing to go by."""
+        tracker = self.tracker
+        if tracker is None or tracker.estimate is None or self.mode != "track":
+            return None
+        current = tracker.place.id
+        through = self._through_graph(current, max_places=len(self._known))
+        unreached = {p for p in self._known if p != current and p not in through}
+        return unreached | places_near(current, tracker.estimate.pose, through, within_m)
+
     def _measure_backgrounds(self, prepared: PreparedPanorama, odo: Odometry | None
                              ) -> tuple[tuple[int, float], ...]:
         done: list[tuple[int, float]] = []
@@ -820,9 +832,10 @@ class Localiser:
         is by the acquisition's recognition margin (§9.2: LRP minus background)."""
         assert self.acquisition is not None
         s = self.acquisition.settings
+        near = self._near_estimate(s.known_within_m)
         best, best_id = s.recognition_margin, None
         for pid, known in self._known.items():
-            if pid == exclude:
+            if pid == exclude or (near is not None and pid not in near):
                 continue
             lead = self.matcher.lrp(prepared, known.templates) - (
                 s.lrp_background if known.background is None else known.background)

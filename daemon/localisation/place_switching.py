@@ -107,6 +107,21 @@ class PlaceSwitcher:
         return None
 
 
+def places_near(current: int, pose: tuple[float, float, float],
+                through: dict[int, UncertainSE2], within_m: float) -> set[int]:
+    """The places whose reference lies within ``within_m`` of ``pose`` (an estimate in
+    place ``current``), each reached through the map's transitions (``through``:
+    T_current_p) and allowed the path's drift at 2 sigma. Autonomous acquisition takes a
+    known place back over only from these: a look-alike across the map is no path back."""
+    x, y = pose[0], pose[1]
+    near = {current} if math.hypot(x, y) <= within_m else set()
+    for pid, T in through.items():
+        drift = 2.0 * math.sqrt(max(T.covariance[0, 0] + T.covariance[1, 1], 0.0))
+        if math.hypot(T.mean.x - x, T.mean.y - y) <= within_m + drift:
+            near.add(pid)
+    return near
+
+
 def reliable(covariance: np.ndarray, confidence: float, s: LocalisationSettings) -> bool:
     """An estimate to build on: its xy std within ``reliable_sigma_m`` and its confidence
     at least ``reliable_confidence`` (a cycle's transition, a new place's link)."""

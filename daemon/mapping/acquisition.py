@@ -25,11 +25,16 @@ from kernel.types import Odometry
 
 @dataclass(frozen=True)
 class AcquisitionDecision:
-    """Learn a new place here; the last place's background LRP is ``background_lrp``."""
+    """Learn a new place here; ``background_lrp`` is the first estimate of the last
+    place's background: the LRP here once it has settled (the thesis's rule), or, when the
+    decision comes early (``coverage_margin``), the background the places around here
+    settle at — the LRP here has not settled yet, and standing in for the background it
+    would make the place look unrecognised where it still is."""
 
     place_id: int
     background_lrp: float
     distance_m: float  # travelled since the place
+    lrp: float  # the smoothed LRP at the decision
 
 
 class PlaceAcquisition:
@@ -86,18 +91,18 @@ class PlaceAcquisition:
             return None
         assert self.place_id is not None
         if m < s.lrp_background:  # below the default background: reached at once
-            return AcquisitionDecision(self.place_id, m, self.distance_m)
+            return AcquisitionDecision(self.place_id, m, self.distance_m, m)
         # Beyond the thesis: learn the next place while this one is still recognised, by
         # ``coverage_margin`` above the background the places around here settle at, so
         # the map leaves no stretch where no place stands out.
         expected = self.expected_background
         if expected is not None and s.coverage_margin > 0 \
                 and m < expected + s.coverage_margin:
-            return AcquisitionDecision(self.place_id, m, self.distance_m)
+            return AcquisitionDecision(self.place_id, min(m, expected), self.distance_m, m)
         slope = self.smoothed_slope
         if slope is not None and len(self._slope) == self._n and slope < s.slope_threshold \
                 and m <= s.lrp_max:
-            return AcquisitionDecision(self.place_id, m, self.distance_m)
+            return AcquisitionDecision(self.place_id, m, self.distance_m, m)
         return None
 
 

@@ -113,3 +113,8 @@ class AcquisitionSettings:
                                         "reached, a known place whose LRP is this far above "
                                         "its own background is watched instead of learning "
                                         "a new one (back on a known path)")
+    known_within_m: float = setting(3.0, gt=0.0, le=100.0, doc="...if, while tracking, "
+                                    "the map's transitions put its reference within this "
+                                    "of the estimate (2 sigma of the path's drift allowed; "
+                                    "one no path reaches is not ruled out): a look-alike "
+                                    "elsewhere in the map is not a path back")

@@ -250,7 +250,7 @@ class Daemon:
             if localiser is not None:
                 localiser.know_place(self.mapper.graph.place(decision.place_id))
             self.publish_event("background_reached", place=decision.place_id,
-                               lrp=round(decision.background_lrp, 4),
+                               lrp=round(decision.lrp, 4),
                                distance_m=round(decision.distance_m, 3))
 
         def log_reply(kind: str, fields: dict[str, Any]) -> None:
