@@ -79,3 +79,24 @@ def test_reached_composes_the_first_path_out_to_each_place() -> None:
         assert (reached[i].x, reached[i].y) == (
             pytest.approx(expected.x, abs=1e-9), pytest.approx(expected.y, abs=1e-9))
     assert sorted(graph.reached(1, max_places=3)) == [2, 3]
+
+
+def test_a_thousand_place_lattice_with_cycles_is_straightened() -> None:
+    """The bench's map (tools/bench/embedding.py): a serpentine of 1000 places whose
+    heading drifts 0.01 rad a leg, cycles closed between rows every fifth column. Dead
+    reckoning ends metres off; the embedding puts every place near its lattice point."""
+    from tools.bench.embedding import COLUMNS, lattice_map
+
+    graph = lattice_map()
+    poses = embed(graph)
+    assert len(poses) == len(graph) == 1000
+
+    def error(pid: int, pose: SE2) -> float:
+        row, k = divmod(pid - 1, COLUMNS)
+        col = k if row % 2 == 0 else COLUMNS - 1 - k
+        return math.hypot(pose.x - col, pose.y - row)
+
+    from daemon.mapping.embedding import _dead_reckoning
+    drifted = _dead_reckoning(graph, 1)
+    assert max(error(p, x) for p, x in drifted.items()) > 5.0
+    assert max(error(p, x) for p, x in poses.items()) < 0.5

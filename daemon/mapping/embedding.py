@@ -7,10 +7,12 @@ Each transition T_a_b, measured with covariance Σ, is one residual
     e_ab = log( T_a_b⁻¹ ∘ (X_a⁻¹ ∘ X_b) ),   whitened by L with Lᵀ L = Σ⁻¹,
 
 X_a the place poses in the map frame, X_first fixed at the origin; the sum of ‖L e‖² is
-minimised (scipy's trust-region least squares, the Jacobian's sparsity given: each
-residual touches two places). A map that is a chain (no cycle) comes out as the
-composition of its transitions; a closed cycle spreads its error over the loop by the
-transitions' covariances. Places that no transition joins to the first one are left out.
+minimised (scipy's trust-region least squares with the analytic Jacobian, sparse: each
+residual touches two places; residuals and Jacobian computed for all edges at once, 0.75 s
+for a thousand places, `placecell-bench --only embedding`). A map that is a chain (no
+cycle) comes out as the composition of its transitions; a closed cycle spreads its error
+over the loop by the transitions' covariances. Places that no transition joins to the
+first one are left out.
 """
 
 from __future__ import annotations
@@ -19,10 +21,9 @@ from collections import deque
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.sparse import lil_matrix
+from scipy.sparse import csr_matrix
 
 from daemon.mapping.graph import TopologicalMap
-from daemon.mapping.transition import Transition
 from kernel.angles import wrap_angle
 from kernel.se2 import SE2
 
@@ -39,27 +40,64 @@ def embed(graph: TopologicalMap) -> dict[int, SE2]:
     free = sorted(p for p in initial if p != anchor)
     if not free or len(edges) < len(free) + 1:  # a tree: nothing to spread
         return initial
-    column = {p: 3 * i for i, p in enumerate(free)}
-    roots = [np.linalg.cholesky(np.linalg.inv(t.T_from_to.covariance)).T for t in edges]
-    measured = [t.T_from_to.mean for t in edges]
+    index = {p: i for i, p in enumerate(free)}  # the anchor is row len(free)
+    a = np.array([index.get(t.from_id, len(free)) for t in edges])
+    b = np.array([index.get(t.to_id, len(free)) for t in edges])
+    z = np.array([t.T_from_to.mean.as_tuple() for t in edges])
+    roots = np.array([np.linalg.cholesky(np.linalg.inv(t.T_from_to.covariance)).T
+                      for t in edges])
+    # R(-θz) tz: the measured translation seen from its own end, once for all.
+    cz, sz = np.cos(z[:, 2]), np.sin(z[:, 2])
+    z_back = np.stack([cz * z[:, 0] + sz * z[:, 1], -sz * z[:, 0] + cz * z[:, 1]], axis=1)
 
-    def pose(x: np.ndarray, place: int) -> SE2:
-        if place == anchor:
-            return SE2(0.0, 0.0, 0.0)
-        c = column[place]
-        return SE2(float(x[c]), float(x[c + 1]), float(x[c + 2]))
+    def poses(x: np.ndarray) -> np.ndarray:
+        return np.vstack([x.reshape(-1, 3), np.zeros((1, 3))])
+
+    def unwhitened(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """e = T_a_b⁻¹ ∘ (X_a⁻¹ ∘ X_b) per edge: e_xy = R(−φ)(p_b − p_a) − R(−θz) t_z with
+        φ = θz + θa, e_θ = θb − θa − θz (wrapped); also d = p_b − p_a and φ."""
+        P = poses(x)
+        d = P[b, :2] - P[a, :2]
+        phi = z[:, 2] + P[a, 2]
+        c, s = np.cos(phi), np.sin(phi)
+        e = np.stack([c * d[:, 0] + s * d[:, 1] - z_back[:, 0],
+                      -s * d[:, 0] + c * d[:, 1] - z_back[:, 1],
+                      wrap_angle(P[b, 2] - P[a, 2] - z[:, 2])], axis=1)
+        return e, d, phi
 
     def residuals(x: np.ndarray) -> np.ndarray:
-        out = np.empty(3 * len(edges))
-        for k, (t, z, root) in enumerate(zip(edges, measured, roots, strict=True)):
-            e = z.between(pose(x, t.from_id).between(pose(x, t.to_id)))
-            out[3 * k: 3 * k + 3] = root @ np.array([e.x, e.y, float(wrap_angle(e.yaw))])
-        return out
+        e, _, _ = unwhitened(x)
+        return np.einsum("kij,kj->ki", roots, e).ravel()
+
+    def jacobian(x: np.ndarray) -> csr_matrix:
+        _, d, phi = unwhitened(x)
+        c, s = np.cos(phi), np.sin(phi)
+        n = len(edges)
+        d_b = np.zeros((n, 3, 3))  # ∂e/∂X_b: R(−φ) on the translation, 1 on the heading
+        d_b[:, 0, 0], d_b[:, 0, 1], d_b[:, 1, 0], d_b[:, 1, 1] = c, s, -s, c
+        d_b[:, 2, 2] = 1.0
+        d_a = -d_b  # ∂e/∂X_a: the opposite, plus ∂R(−φ)/∂θa (p_b − p_a)
+        d_a[:, 0, 2] = -s * d[:, 0] + c * d[:, 1]
+        d_a[:, 1, 2] = -c * d[:, 0] - s * d[:, 1]
+        rows, cols, values = [], [], []
+        for place, block in ((a, roots @ d_a), (b, roots @ d_b)):
+            free_end = place < len(free)
+            k = np.nonzero(free_end)[0]
+            r = 3 * k[:, None, None] + np.arange(3)[None, :, None]
+            q = 3 * place[k][:, None, None] + np.arange(3)[None, None, :]
+            rows.append(np.broadcast_to(r, (len(k), 3, 3)).ravel())
+            cols.append(np.broadcast_to(q, (len(k), 3, 3)).ravel())
+            values.append(block[k].ravel())
+        return csr_matrix((np.concatenate(values), (np.concatenate(rows),
+                                                    np.concatenate(cols))),
+                          shape=(3 * n, 3 * len(free)))
 
     x0 = np.concatenate([np.array(initial[p].as_tuple()) for p in free])
-    solved = least_squares(residuals, x0, jac_sparsity=_sparsity(edges, column),
-                           x_scale="jac", method="trf")
-    return {anchor: SE2(0.0, 0.0, 0.0)} | {p: pose(solved.x, p) for p in free}
+    solved = least_squares(residuals, x0, jac=jacobian, x_scale="jac", method="trf")
+    P = poses(solved.x)
+    return {anchor: SE2(0.0, 0.0, 0.0)} | {
+        p: SE2(float(P[i, 0]), float(P[i, 1]), float(wrap_angle(P[i, 2])))
+        for i, p in enumerate(free)}
 
 
 def _dead_reckoning(graph: TopologicalMap, anchor: int) -> dict[int, SE2]:
@@ -73,12 +111,3 @@ def _dead_reckoning(graph: TopologicalMap, anchor: int) -> dict[int, SE2]:
                 poses[t.to_id] = poses[here].compose(t.T_from_to.mean)
                 queue.append(t.to_id)
     return poses
-
-
-def _sparsity(edges: list[Transition], column: dict[int, int]) -> lil_matrix:
-    pattern = lil_matrix((3 * len(edges), 3 * len(column)), dtype=int)
-    for k, t in enumerate(edges):
-        for place in (t.from_id, t.to_id):
-            if place in column:
-                pattern[3 * k: 3 * k + 3, column[place]: column[place] + 3] = 1
-    return pattern

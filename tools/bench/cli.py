@@ -18,6 +18,7 @@ GROUPS = {
     "sim": "tools.bench.sim",
     "landmarks": "tools.bench.landmarks",
     "mapfile": "tools.bench.mapfile",
+    "embedding": "tools.bench.embedding",
     "localisation": "tools.bench.localisation",
     "global": "tools.bench.global_search",
     "disambiguation": "tools.bench.disambiguation",
