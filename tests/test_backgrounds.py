@@ -5,6 +5,7 @@ own-view estimates, measured by the mapper as places are learned."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -68,3 +69,30 @@ def test_the_mapper_measures_each_place_in_the_others_views(tmp_path: Path) -> N
             expected = np.mean([matcher.lrp(views[q], templates) for q in ids if q != pid])
             assert store.load().place(pid).background_cross == pytest.approx(expected)
             assert mapper.graph.place(pid).background_cross == pytest.approx(expected)
+
+
+def test_a_new_view_is_added_to_the_means_it_joins_and_a_full_set_is_left_alone(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """With views limited to 2 other places, the third place learned joins the first
+    two's views (one LRP added to each mean) and later ones join none: every mean is
+    the one measured over its views from scratch."""
+    import daemon.service.mapper as mapper_module
+
+    monkeypatch.setattr(mapper_module, "views_of", functools.partial(views_of, limit=2))
+    rng = np.random.default_rng(5)
+    places = [synthetic_place(rng, label) for label in "abcde"]
+    with MapStore.open(tmp_path / "map.db", "abc123") as store:
+        mapper = Mapper(store, OdometryNoiseSettings())
+        ids, changes = [], []
+        for place in places:
+            stored, _ = mapper.add_place(place, None)
+            ids.append(stored.id)
+            changes.append(sorted(p.id for p in mapper.measure_cross_backgrounds(stored.id)))
+        assert changes == [[], ids[:2], ids[:3], [ids[3]], [ids[4]]]
+        matcher = FastMatcher()
+        views = {p: PreparedPanorama.of(to_grey(store.reference_panorama(p))) for p in ids}
+        for pid, place in zip(ids, places, strict=True):
+            templates = PreparedTemplates.of(place.landmarks.templates())
+            expected = np.mean([matcher.lrp(views[q], templates)
+                                for q in views_of(pid, ids, limit=2)])
+            assert store.load().place(pid).background_cross == pytest.approx(expected)

@@ -171,16 +171,43 @@ class Mapper:
         """The backgrounds in other places' views (daemon/mapping/backgrounds.py) that a
         place just learned brings: its own, and those of the places whose views it joins
         (while the map is smaller than CROSS_VIEWS + 1 places); stored and in the map.
-        Returns the places whose background changed (a read-only map: none)."""
+        A place whose views only gain the new one gets that view's LRP added to its mean
+        (one panorama read, not its every view again). Returns the places whose
+        background changed (a read-only map: none)."""
         if self.store.readonly:
             return []
         with self._lock:
             ids = [p.id for p in self.graph.places]
-            changed = [q for q in ids if q == place_id or place_id in views_of(q, ids)
-                       or self.graph.place(q).background_cross is None]
+            others = [q for q in ids if q != place_id]
+            full, grown = [place_id], {}
+            for q in others:
+                before, after = views_of(q, others), views_of(q, ids)
+                cross = self.graph.place(q).background_cross
+                if cross is None:
+                    full.append(q)
+                elif after != before:
+                    if sorted([*before, place_id]) == sorted(after):
+                        grown[q] = (cross, len(before))
+                    else:
+                        full.append(q)
         if len(ids) < 2:
             return []
-        return self._store_cross_backgrounds(changed)
+        return self._store_cross_backgrounds(full) + self._grow_cross_backgrounds(
+            place_id, grown)
+
+    def _grow_cross_backgrounds(self, view: int, grown: dict[int, tuple[float, int]]
+                                ) -> list[Place]:
+        """Each place of ``grown`` (its mean over n views) with one view more: ``view``'s
+        reference panorama."""
+        if not grown:
+            return []
+        with self._lock:
+            templates = [PreparedTemplates.of(self.graph.place(q).landmarks.templates())
+                         for q in grown]
+        pano = PreparedPanorama.of(to_grey(self.store.reference_panorama(view)))
+        values = {q: (mean * n + lrp) / (n + 1) for (q, (mean, n)), lrp in zip(
+            grown.items(), FastMatcher().lrps(pano, templates), strict=True)}
+        return self._keep_cross_backgrounds(values)
 
     def _store_cross_backgrounds(self, place_ids: list[int]) -> list[Place]:
         """Each place's mean LRP in its views (views_of), measured, stored and in the
@@ -198,7 +225,10 @@ class Mapper:
             for q, lrp in zip(users, matcher.lrps(pano, [templates[q] for q in users]),
                               strict=True):
                 sums[q] += lrp
-        values = {q: sums[q] / len(views[q]) for q in place_ids if views[q]}
+        return self._keep_cross_backgrounds(
+            {q: sums[q] / len(views[q]) for q in place_ids if views[q]})
+
+    def _keep_cross_backgrounds(self, values: dict[int, float]) -> list[Place]:
         with self._lock:
             self.store.set_cross_backgrounds(values)
             changed = [dataclasses.replace(self.graph.place(q), background_cross=value)
