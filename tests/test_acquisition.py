@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from daemon.mapping.acquisition import BackgroundMeter, PlaceAcquisition
+from daemon.mapping.acquisition import AcquisitionDecision, BackgroundMeter, PlaceAcquisition
 from daemon.mapping.settings import AcquisitionSettings
 from kernel.types import Odometry
 
@@ -79,27 +79,29 @@ def test_background_meter_takes_the_settled_median() -> None:
     assert values == [pytest.approx(0.63)]
 
 
+def _first_decision(acq: PlaceAcquisition, background: float) -> AcquisitionDecision | None:
+    """Drive straight on in 2 cm steps until ``acq`` decides (None: within 40 m it does not)."""
+    for i in range(1, 2000):
+        x = 0.02 * i
+        decision = acq.observe(_lrp(x, background=background), Odometry(x, 0.0, 0.0, i, i))
+        if decision is not None:
+            return decision
+    return None
+
+
 def test_an_early_decision_estimates_the_background_as_the_places_around() -> None:
     """With backgrounds measured nearby (0.72), the next place is learned while the LRP
     still stands within coverage_margin of them; the LRP there has not settled, so the
     first estimate of the place's background is the measured one, not the LRP."""
     acq = PlaceAcquisition(SETTINGS)
     acq.reset(5, expected_background=0.72)
-    for i in range(1, 2000):
-        x = 0.02 * i
-        decision = acq.observe(_lrp(x, background=0.74), Odometry(x, 0.0, 0.0, i, i))
-        if decision is not None:
-            break
+    decision = _first_decision(acq, background=0.74)
     assert decision is not None and decision.place_id == 5
     assert acq.smoothed_lrp is not None and acq.smoothed_lrp > 0.72
     assert decision.background_lrp == pytest.approx(0.72)
     # Where the LRP has settled (the thesis's rule), the estimate is the LRP itself.
     acq.reset(6)
-    for i in range(1, 2000):
-        x = 0.02 * i
-        decision = acq.observe(_lrp(x, background=0.74), Odometry(x, 0.0, 0.0, i, i))
-        if decision is not None:
-            break
+    decision = _first_decision(acq, background=0.74)
     assert decision is not None and decision.place_id == 6
     assert decision.background_lrp == pytest.approx(acq.smoothed_lrp)
     assert decision.background_lrp == pytest.approx(0.74, abs=0.02)
