@@ -321,7 +321,8 @@ class Daemon:
                     if p.id in (pair.a_id, pair.b_id):
                         localiser.know_features(pair)
             self.publish_event("place_learned", place=p.id, label=p.label,
-                               landmarks=p.landmark_count, lookalikes=outcome.lookalikes)
+                               landmarks=p.landmark_count, lookalikes=outcome.lookalikes,
+                               reference_stamp_ns=outcome.reference_stamp_ns)
             for t in added:
                 self.publish_event("transition_added", source=t.source,
                                    **{"from": t.from_id, "to": t.to_id})

@@ -140,6 +140,7 @@ class LearnOutcome:
     lookalikes: list[int] = field(default_factory=list)  # places it was told apart from
     # Places whose background in other places' views it changed (itself among them).
     rebackgrounded: list[Place] = field(default_factory=list)
+    reference_stamp_ns: int = 0  # the odometry stamp at the place's reference pose
 
 
 class LearnJob:
@@ -215,12 +216,13 @@ class LearnJob:
                           created_unix_s=time.time(),
                           local_space=self._profile(tbl.reference_panorama))
             stored, transitions = self.mapper.add_place(place, self._link)
-            outcome = LearnOutcome(stored, None, "")
+            outcome = LearnOutcome(stored, None, "", reference_stamp_ns=tbl.start.stamp_ns)
             self._reply("progress", {"phase": "lookalikes", "fraction": 1.0})
             try:
                 changed = self.mapper.measure_cross_backgrounds(stored.id)
                 pairs = self.mapper.learn_features(stored.id, tbl.views, self.localisation)
-                outcome = LearnOutcome(stored, None, "", [p.b_id for p in pairs], changed)
+                outcome = LearnOutcome(stored, None, "", [p.b_id for p in pairs], changed,
+                                       tbl.start.stamp_ns)
             except Exception:  # noqa: BLE001 - the place is stored; cues can be redone
                 log.exception("place %d: its backgrounds or look-alikes' features were not "
                               "found", stored.id)
