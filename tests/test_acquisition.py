@@ -79,6 +79,28 @@ def test_background_meter_takes_the_settled_median() -> None:
     assert values == [pytest.approx(0.63)]
 
 
+def test_background_meter_ignores_the_way_back_past_the_place() -> None:
+    """The decision came 1.5 m from the place; the tour turns back past it (where its
+    LRP is high) and on 4 m beyond: only the frames at least 1.5 m from the place count."""
+    origin = Odometry(0.0, 0.0, 0.0, 0, 0)
+    meter = BackgroundMeter(4, 0.70, window_m=2.0, skip_m=0.5, origin=origin,
+                            min_away_m=1.5)
+    xs = [1.5 + 0.05 * i for i in range(1, 11)]  # on 0.5 m, then back the way it came
+    xs += [2.0 - 0.05 * i for i in range(1, 121)]  # ...past the place to x = -4
+    value = None
+    for i, x in enumerate(xs):
+        lrp = 0.95 - 0.1 * abs(x) if abs(x) < 1.5 else 0.64
+        value = meter.observe(lrp, Odometry(x, 0.0, 0.0, i, i)) if value is None else value
+    assert value == pytest.approx(0.64)
+    # Without the origin the view near the place is taken for its background.
+    blind = BackgroundMeter(4, 0.70, window_m=2.0, skip_m=0.5)
+    value = None
+    for i, x in enumerate(xs):
+        lrp = 0.95 - 0.1 * abs(x) if abs(x) < 1.5 else 0.64
+        value = blind.observe(lrp, Odometry(x, 0.0, 0.0, i, i)) if value is None else value
+    assert value is not None and value > 0.8
+
+
 def _first_decision(acq: PlaceAcquisition, background: float) -> AcquisitionDecision | None:
     """Drive straight on in 2 cm steps until ``acq`` decides (None: within 40 m it does not)."""
     for i in range(1, 2000):
@@ -99,6 +121,7 @@ def test_an_early_decision_estimates_the_background_as_the_places_around() -> No
     assert decision is not None and decision.place_id == 5
     assert acq.smoothed_lrp is not None and acq.smoothed_lrp > 0.72
     assert decision.background_lrp == pytest.approx(0.72)
+    assert decision.away_m == pytest.approx(decision.distance_m)  # straight on from it
     # Where the LRP has settled (the thesis's rule), the estimate is the LRP itself.
     acq.reset(6)
     decision = _first_decision(acq, background=0.74)

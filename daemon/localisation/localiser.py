@@ -327,15 +327,15 @@ class Localiser:
                             switched_from, closed, recent, recent_lrp, decision, background,
                             {k: round(v, 3) for k, v in timings.items()}, event)
 
-    def recognise(self, frame: Frame, place_ids: list[int]) -> tuple[PlaceScore, ...]:
+    def recognise(self, frame: Frame, place_ids: list[int], estimated: bool = False
+                  ) -> tuple[PlaceScore, ...]:
         """Each place's LRP in ``frame`` and its lead over the place's background (§9.2),
         without touching the belief: what a frame's recognition step computes, for
-        evaluations that ask about places of their choosing."""
+        evaluations that ask about places of their choosing. ``estimated``: a place whose
+        background was never measured is scored against its estimate (as the global
+        search scores it), not the default."""
         prepared = PreparedPanorama.of(to_grey(self.unwarper.unwarp(frame.image)))
-        return tuple(self._score(prepared, pid) for pid in place_ids)
-
-    def _score(self, prepared: PreparedPanorama, place_id: int) -> PlaceScore:
-        return self._score_many(prepared, [place_id])[0]
+        return tuple(self._score_many(prepared, place_ids, estimated))
 
     def _score_many(self, prepared: PreparedPanorama, place_ids: list[int],
                     estimated: bool = False) -> list[PlaceScore]:
@@ -766,7 +766,7 @@ class Localiser:
             return None, None, None, ()
         if self._watch_next is not None:
             self._watched, self._watch_next = self._watch_next, None
-            self.acquisition.reset(self._watched[0], self._expected_background())
+            self.acquisition.reset(self._watched[0])
         if self._watched is None and not self._meters:
             return None, None, None, ()
         prepared = prepare()
@@ -775,28 +775,40 @@ class Localiser:
             return None, None, None, background
         place_id, templates = self._watched
         lrp = self.matcher.lrp(prepared, templates)
+        # Asked every frame: the place's estimates come in after it is learned.
+        self.acquisition.expected_background = self._expected_background(place_id)
         decision = self.acquisition.observe(lrp, odo)
         if decision is None:
             return place_id, lrp, None, background
         # The watched place is behind us: measure the level its LRP settles at...
         acq = self.acquisition.settings
-        self._meters.append(BackgroundMeter(place_id, decision.background_lrp,
-                                            acq.background_window_m, acq.background_skip_m))
+        self._meters.append(BackgroundMeter(
+            place_id, decision.background_lrp, acq.background_window_m,
+            acq.background_skip_m, decision.origin, decision.away_m))
         # ...and back on a known path another place may be recognised here (the most
         # likely place, §7.1): watch that one instead of learning.
         known = self._most_likely(prepared, exclude=place_id)
         if known is not None:
             self._watched = (known, self._known[known].templates)
-            self.acquisition.reset(known, self._expected_background())
+            self.acquisition.reset(known)
             return place_id, lrp, None, background
         self._watched = None  # until the new place is learned and watched
         self.acquisition.reset(None)
         return place_id, lrp, decision, background
 
-    def _expected_background(self) -> float | None:
-        """The median background LRP of the places measured so far (None: none yet)."""
-        measured = sorted(k.background for k in self._known.values() if k.background is not None)
-        return measured[len(measured) // 2] if measured else None
+    def _expected_background(self, place_id: int) -> float | None:
+        """The background LRP the watched place is expected to settle at: measured if it
+        is already, else its estimate in other places' views on the map's own-view level
+        (daemon/mapping/backgrounds.py), else in its own view; None: none of them.
+        The estimate is the place's own: on office 1's 93 places it came within 0.013 of
+        the background measured later (mean absolute error), the map's median within
+        0.044 — a place whose background stands high would be left too late."""
+        known = self._known.get(place_id)
+        if known is None or (known.background is None
+                             and known.place.background_cross is None
+                             and known.place.background_estimate is None):
+            return None
+        return self._background(known, estimated=True)
 
     def _near_estimate(self, within_m: float) -> set[int] | None:
         """The places the map's transitions put within ``within_m`` of the tracked

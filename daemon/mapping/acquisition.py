@@ -7,10 +7,11 @@ smooths that again, and declares the background reached when the smoothed slope 
 below a threshold while the LRP lies between the default background (0.7) and the
 maximum (0.85); an LRP below 0.7 is background at once. Here the samples are taken
 against *distance travelled* (odometry), not frames, so the robot's speed does not change
-the decision; frames while stationary or only turning add nothing. Once backgrounds have
-been measured nearby, a new place is learned a little earlier, while the last one still
-stands ``coverage_margin`` above that background: the background rule alone leaves a
-stretch before each new place where no place is recognised.
+the decision; frames while stationary or only turning add nothing. Once the place's
+background can be estimated (daemon/mapping/backgrounds.py), a new place is learned a
+little earlier, while the last one still stands ``coverage_margin`` above it: the
+background rule alone leaves a stretch before each new place where no place is
+recognised.
 """
 
 from __future__ import annotations
@@ -35,6 +36,8 @@ class AcquisitionDecision:
     background_lrp: float
     distance_m: float  # travelled since the place
     lrp: float  # the smoothed LRP at the decision
+    origin: Odometry | None = None  # the odometry where the place was first watched
+    away_m: float = 0.0  # how far from ``origin`` the decision came
 
 
 class PlaceAcquisition:
@@ -46,7 +49,8 @@ class PlaceAcquisition:
 
     def reset(self, place_id: int | None, expected_background: float | None = None) -> None:
         """Watch ``place_id`` from here on (None: no place to watch). ``expected_background``:
-        the background LRP places here are known to settle at (see ``_decide``)."""
+        the background LRP the place is expected to settle at (see ``_decide``; the
+        caller may update it as estimates come in)."""
         self.place_id = place_id
         self.expected_background = expected_background
         self.distance_m = 0.0
@@ -56,6 +60,7 @@ class PlaceAcquisition:
         self._smooth: deque[float] = deque(maxlen=self._n + 1)  # LRP'
         self._slope: deque[float] = deque(maxlen=self._n)  # s_i
         self._last: Odometry | None = None
+        self.origin: Odometry | None = None  # the first odometry while watching the place
         self.smoothed_lrp: float | None = None
         self.smoothed_slope: float | None = None
 
@@ -65,6 +70,7 @@ class PlaceAcquisition:
             return None
         last, self._last = self._last, odometry
         if last is None:
+            self.origin = odometry
             return None
         step = math.hypot(odometry.x - last.x, odometry.y - last.y)
         if step < 1e-4:  # stationary or turning on the spot: no new information
@@ -91,19 +97,26 @@ class PlaceAcquisition:
             return None
         assert self.place_id is not None
         if m < s.lrp_background:  # below the default background: reached at once
-            return AcquisitionDecision(self.place_id, m, self.distance_m, m)
+            return self._decision(m, m)
         # Beyond the thesis: learn the next place while this one is still recognised, by
-        # ``coverage_margin`` above the background the places around here settle at, so
-        # the map leaves no stretch where no place stands out.
+        # ``coverage_margin`` above the background it is expected to settle at, so the
+        # map leaves no stretch where no place stands out.
         expected = self.expected_background
         if expected is not None and s.coverage_margin > 0 \
                 and m < expected + s.coverage_margin:
-            return AcquisitionDecision(self.place_id, min(m, expected), self.distance_m, m)
+            return self._decision(min(m, expected), m)
         slope = self.smoothed_slope
         if slope is not None and len(self._slope) == self._n and slope < s.slope_threshold \
                 and m <= s.lrp_max:
-            return AcquisitionDecision(self.place_id, m, self.distance_m, m)
+            return self._decision(m, m)
         return None
+
+    def _decision(self, background: float, lrp: float) -> AcquisitionDecision:
+        assert self.place_id is not None and self._last is not None
+        origin, here = self.origin, self._last
+        away = 0.0 if origin is None else math.hypot(here.x - origin.x, here.y - origin.y)
+        return AcquisitionDecision(self.place_id, background, self.distance_m, lrp, origin,
+                                   away)
 
 
 class BackgroundMeter:
@@ -111,29 +124,46 @@ class BackgroundMeter:
     acquisition's decision comes when the LRP *reaches* the background (or earlier, see
     ``coverage_margin``); the level it settles at is measured further on: the median LRP
     over ``window_m`` travelled after the first ``skip_m``, frames while stationary or
-    turning ignored."""
+    turning ignored — and, given the ``origin`` where the place was watched from, frames
+    nearer to it than ``min_away_m`` (where the decision came) ignored too: a tour that
+    turns back past the place would otherwise take its view near the place for its
+    background (office 1: a place learned 0.30 m from one whose background had been
+    measured on the way back over it)."""
 
     def __init__(self, place_id: int, first_estimate: float, window_m: float,
-                 skip_m: float = 0.0) -> None:
+                 skip_m: float = 0.0, origin: Odometry | None = None,
+                 min_away_m: float = 0.0) -> None:
         self.place_id = place_id
         self.window_m = window_m
         self.skip_m = skip_m
         self.first_estimate = first_estimate
+        self.origin = origin
+        self.min_away_m = min_away_m
         self.samples: list[float] = []
-        self.distance_m = 0.0
+        self.distance_m = 0.0  # travelled since the decision
+        self.sampled_m = 0.0  # of which away from the place, after the skip
         self._last: Odometry | None = None
 
     def observe(self, lrp: float, odometry: Odometry | None) -> float | None:
-        """The background once ``skip_m + window_m`` is travelled (then once only)."""
+        """The background once ``window_m`` is travelled away from the place after the
+        first ``skip_m`` (then once only)."""
         if odometry is None:
             return None
         last, self._last = self._last, odometry
-        if last is None or math.hypot(odometry.x - last.x, odometry.y - last.y) < 1e-4:
+        if last is None:
             return None
-        self.distance_m += math.hypot(odometry.x - last.x, odometry.y - last.y)
-        if self.distance_m >= self.skip_m:
-            self.samples.append(lrp)
-        if self.distance_m < self.skip_m + self.window_m:
+        step = math.hypot(odometry.x - last.x, odometry.y - last.y)
+        if step < 1e-4:
             return None
-        values = sorted(self.samples) or [self.first_estimate]
-        return float(values[len(values) // 2])
+        self.distance_m += step
+        if self.distance_m < self.skip_m or not self._away(odometry):
+            return None
+        self.samples.append(lrp)
+        self.sampled_m += step
+        if self.sampled_m < self.window_m:
+            return None
+        return float(sorted(self.samples)[len(self.samples) // 2])
+
+    def _away(self, odometry: Odometry) -> bool:
+        return self.origin is None or math.hypot(
+            odometry.x - self.origin.x, odometry.y - self.origin.y) >= self.min_away_m

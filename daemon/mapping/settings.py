@@ -102,12 +102,13 @@ class AcquisitionSettings:
                                     "far from the last place before a new one is learned")
     background_window_m: float = setting(3.0, gt=0.0, le=100.0, doc="after the decision, "
                                          "the place's background LRP is the median of its LRP "
-                                         "over this far travelled (the level it settles at)")
+                                         "over this far travelled no nearer to the place "
+                                         "than the decision came (the level it settles at)")
     background_skip_m: float = setting(1.0, ge=0.0, le=100.0, doc="...counted from this far "
                                        "after the decision (nearer, the LRP has not settled)")
-    coverage_margin: float = setting(0.08, ge=0.0, le=1.0, doc="once backgrounds are "
-                                     "measured, learn the next place while the last one's "
-                                     "LRP is still this far above their median (0: the "
+    coverage_margin: float = setting(0.08, ge=0.0, le=1.0, doc="learn the next place "
+                                     "while the last one's LRP is still this far above the "
+                                     "background it is estimated to settle at (0: the "
                                      "thesis's rule alone)")
     recognition_margin: float = setting(0.05, ge=0.0, le=1.0, doc="when the background is "
                                         "reached, a known place whose LRP is this far above "
