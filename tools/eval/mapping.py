@@ -6,13 +6,17 @@ own pieces run on every frame — the Localiser with autonomous acquisition watc
 place learned last, Turn Back and Look (``drive_tbl``) when the background is reached,
 the Mapper storing each place with its transition in a real map file. Second pass along
 the same tour with the finished map: a frame is *covered* when some place's LRP exceeds
-its background by ``--margin`` (0.05). The evaluator picks which places to try at a frame
-by the true distance to their reference poses (``--near`` m; a lower bound on coverage),
-reads truth from the simulator only, and never hands it to the method.
+its background by ``--margin`` (0.05) — the background measured as the robot left the
+place, or for a place it never left (the last of the tour) the map's estimate of it
+(daemon/mapping/backgrounds.py), as the global search takes it. The evaluator picks
+which places to try at a frame by the true distance to their reference poses
+(``--near`` m; a lower bound on coverage), reads truth from the simulator only, and never
+hands it to the method.
 
 Metrics: ``places``, ``path_m`` (driven by the autopilot, TBL excluded), ``coverage``,
 ``min_spacing_m`` (between true reference poses), ``places_per_10m``, ``learn_s_mean``
-(robot seconds per Turn Back and Look), ``learn_failures``.
+(robot seconds per Turn Back and Look), ``learn_failures``, ``first_pass_done`` (the
+first pass drove the whole tour: False only if it ran out of time).
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import functools
+import json
 import math
 import tempfile
 import time
@@ -57,6 +62,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="second pass: one frame every this far along the tour")
     p.add_argument("--world", help="a world file or generate:<kind>:<seed> (default: from "
                    "--world-kind and --world-seed)")
+    p.add_argument("--coverage-margin", type=float,
+                   help="[mapping.acquisition] coverage_margin (default: the configured)")
+    p.add_argument("--map", type=Path, help="keep the first pass's map (and its references) "
+                   "here and reuse it when built before with the same world and settings")
+    p.add_argument("--trace", type=Path, help="write each second-pass frame here (JSON "
+                   "lines: true pose, covered, best place and lead, nearest place's LRP "
+                   "and background)")
 
 
 def _world(args: argparse.Namespace) -> str:
@@ -83,9 +95,29 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     base_cfg = load(None)
     cfg = dataclasses.replace(base_cfg, sim=dataclasses.replace(
         base_cfg.sim, realtime=False, seed=args.seed, scenario=""))
+    if args.coverage_margin is not None:
+        cfg = dataclasses.replace(cfg, mapping=dataclasses.replace(
+            cfg.mapping, acquisition=dataclasses.replace(
+                cfg.mapping.acquisition, coverage_margin=args.coverage_margin)))
     scenario = _scenario(args)
+    key = json.dumps({"world": _world(args), "speed": args.speed, "laps": args.laps,
+                      "frame_rate": args.frame_rate, "seed": args.seed,
+                      "acquisition": dataclasses.asdict(cfg.mapping.acquisition)})
     with tempfile.TemporaryDirectory() as tmp:
-        places, refs, stats = _first_pass(cfg, scenario, Path(tmp) / "map.db")
+        map_path = args.map or Path(tmp) / "map.db"
+        kept = _kept(map_path, key) if args.map else None
+        if kept is None:
+            for stale in (map_path, *_beside(map_path)):
+                stale.unlink(missing_ok=True)
+            places, refs, stats = _first_pass(cfg, scenario, map_path)
+            if args.map:
+                _references(map_path).write_text(json.dumps(
+                    {"key": key, "references": refs, "stats": stats}))
+        else:
+            refs, stats = kept
+            with MapStore.open(map_path, geometry_checksum(cfg.mirror, cfg.panorama),
+                               readonly=True) as store:
+                places = store.load().places
         coverage, frames = _second_pass(cfg, scenario, places, refs, args)
     spacing = min((math.dist(a[:2], b[:2]) for i, a in enumerate(refs) for b in refs[i + 1:]),
                   default=float("nan"))
@@ -103,9 +135,31 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             "learn_s_mean": round(float(np.mean(stats["learn_s"])), 2)
             if stats["learn_s"] else None,
             "learn_failures": stats["failures"],
+            "first_pass_done": stats["tour_done"],
             "wall_s": round(stats["wall_s"], 1),
         },
     }
+
+
+def _references(map_path: Path) -> Path:
+    return map_path.with_suffix(".references.json")
+
+
+def _beside(map_path: Path) -> list[Path]:
+    return [map_path.with_name(map_path.name + suffix) for suffix in ("-wal", "-shm")] + [
+        _references(map_path)]
+
+
+def _kept(map_path: Path, key: str
+          ) -> tuple[list[tuple[float, float, float]], dict[str, Any]] | None:
+    """The references and first-pass figures of a map built before with ``key``."""
+    path = _references(map_path)
+    if not map_path.exists() or not path.exists():
+        return None
+    data = json.loads(path.read_text())
+    if data.get("key") != key:
+        return None
+    return [tuple(r) for r in data["references"]], data["stats"]
 
 
 def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path
@@ -127,7 +181,9 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path
     failures, path_m = 0, 0.0
     retry_at_m: float | None = 0.0  # the first place as soon as possible
     last_pose = robot.true_pose()
-    deadline_s = scenario.end_time_s() * 3 + 600.0
+    # The tour's own time, with room to spare, plus each Turn Back and Look's and the
+    # pause after it: a long tour learns a hundred places (2800 s of learning).
+    deadline_s = scenario.end_time_s() * 2 + 600.0
     with store:
         while not robot.autopilot_done() and robot.now_ns() / 1e9 < deadline_s:
             frame, _ = sensors.frame()
@@ -157,6 +213,7 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path
                 retry_at_m = path_m + RETRY_AFTER_M
                 continue
             learn_s.append((robot.now_ns() - start_ns) / 1e9)
+            deadline_s += learn_s[-1] + (scenario.resume_after_s or 0.0)
             ref = _reference_pose(robot)
             stored, added = mapper.add_place(Place(
                 tbl.result(), tbl.reference_panorama, created_unix_s=time.time(),
@@ -168,10 +225,11 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path
             retry_at_m = None
             last_pose = robot.true_pose()
         places = mapper.graph.places
+        tour_done = robot.autopilot_done()
     camera.close()
     base.close()
     return places, refs, {"path_m": path_m, "learn_s": learn_s, "failures": failures,
-                          "wall_s": time.perf_counter() - t_wall}
+                          "tour_done": tour_done, "wall_s": time.perf_counter() - t_wall}
 
 
 def _begin(mapper: Mapper, link: list[Link | None], localiser: Localiser, start: Any
@@ -197,6 +255,7 @@ def _second_pass(cfg: PlacecellConfig, scenario: Scenario, places: list[Place],
         localiser.know_place(place)
     rng = np.random.default_rng(args.seed)
     covered = total = 0
+    trace = args.trace.open("w") if args.trace else None
     step_ns = int(1e9 / 50)
     last = robot.true_pose()
     run = args.every_m
@@ -212,8 +271,33 @@ def _second_pass(cfg: PlacecellConfig, scenario: Scenario, places: list[Place],
         raw = robot.renderer.donut(pose, noise_sigma=cfg.camera.sim.noise_sigma, rng=rng)
         near = [places[i].id for i, r in enumerate(refs)
                 if math.dist(r[:2], pose[:2]) <= args.near]
-        scores = localiser.recognise(Frame(raw, robot.now_ns(), total), near)
+        scores = localiser.recognise(Frame(raw, robot.now_ns(), total), near, estimated=True)
         best = max((sc.lead for sc in scores), default=-1.0)
         covered += int(best >= args.margin)
         total += 1
+        if trace is not None:
+            trace.write(json.dumps(_traced(pose, scores, refs, places, args.margin)) + "\n")
+    if trace is not None:
+        trace.close()
     return covered / max(total, 1), total
+
+
+def _traced(pose: tuple[float, float, float], scores: tuple[Any, ...],
+            refs: list[tuple[float, float, float]], places: list[Place], margin: float
+            ) -> dict[str, Any]:
+    """One second-pass frame: the true pose, the best place's lead, and the nearest
+    place (by true distance) with its LRP and background here."""
+    best = max(scores, key=lambda sc: sc.lead, default=None)
+    out: dict[str, Any] = {"x": round(pose[0], 3), "y": round(pose[1], 3),
+                           "yaw": round(pose[2], 4),
+                           "covered": best is not None and best.lead >= margin,
+                           "best": None if best is None else best.place_id,
+                           "best_lead": None if best is None else round(best.lead, 4)}
+    if refs:
+        i = min(range(len(refs)), key=lambda k: math.dist(refs[k][:2], pose[:2]))
+        near = next((sc for sc in scores if sc.place_id == places[i].id), None)
+        out |= {"nearest": places[i].id, "nearest_m": round(math.dist(refs[i][:2], pose[:2]), 3)}
+        if near is not None:
+            out |= {"nearest_lrp": round(near.lrp, 4),
+                    "nearest_background": round(near.lrp - near.lead, 4)}
+    return out
