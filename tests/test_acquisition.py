@@ -79,6 +79,25 @@ def test_background_meter_takes_the_settled_median() -> None:
     assert values == [pytest.approx(0.63)]
 
 
+def test_no_decision_nearer_the_place_than_min_distance() -> None:
+    """A tour into a doorway and back: 0.5 m out, back past the place, 0.5 m beyond.
+    2 m travelled with the LRP at 0.6 all along, but never 0.75 m from the place: no
+    decision; on along the way, one as soon as the robot is 0.75 m from it."""
+    acq = PlaceAcquisition(SETTINGS)
+    acq.reset(9)
+    xs = [0.01 * i for i in range(51)] + [0.5 - 0.01 * i for i in range(1, 101)]
+    xs += [-0.5 + 0.01 * i for i in range(1, 101)]
+    assert all(acq.observe(0.6, Odometry(x, 0.0, 0.0, i, i)) is None
+               for i, x in enumerate(xs))
+    decision = None
+    for i in range(1, 100):
+        decision = acq.observe(0.6, Odometry(0.5 + 0.01 * i, 0.0, 0.0, 300 + i, 300 + i))
+        if decision is not None:
+            break
+    assert decision is not None and decision.away_m == pytest.approx(0.75, abs=0.011)
+    assert decision.distance_m > 2.0
+
+
 def test_background_meter_ignores_the_way_back_past_the_place() -> None:
     """The decision came 1.5 m from the place; the tour turns back past it (where its
     LRP is high) and on 4 m beyond: only the frames at least 1.5 m from the place count."""

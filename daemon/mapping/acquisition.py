@@ -93,7 +93,8 @@ class PlaceAcquisition:
         if len(self._smooth) > self._n:
             self._slope.append(abs(self._smooth[-1] - self._smooth[0]))  # s_i
             self.smoothed_slope = sum(self._slope) / len(self._slope)
-        if self.distance_m < s.min_distance_m or len(self._lrp) < self._n:
+        if self.distance_m < s.min_distance_m or len(self._lrp) < self._n \
+                or self._away() < s.min_distance_m:  # a tour turning back near the place
             return None
         assert self.place_id is not None
         if m < s.lrp_background:  # below the default background: reached at once
@@ -111,12 +112,17 @@ class PlaceAcquisition:
             return self._decision(m, m)
         return None
 
-    def _decision(self, background: float, lrp: float) -> AcquisitionDecision:
-        assert self.place_id is not None and self._last is not None
+    def _away(self) -> float:
+        """How far the robot stands from where it began watching the place (odometry)."""
         origin, here = self.origin, self._last
-        away = 0.0 if origin is None else math.hypot(here.x - origin.x, here.y - origin.y)
-        return AcquisitionDecision(self.place_id, background, self.distance_m, lrp, origin,
-                                   away)
+        if origin is None or here is None:
+            return 0.0
+        return math.hypot(here.x - origin.x, here.y - origin.y)
+
+    def _decision(self, background: float, lrp: float) -> AcquisitionDecision:
+        assert self.place_id is not None
+        return AcquisitionDecision(self.place_id, background, self.distance_m, lrp,
+                                   self.origin, self._away())
 
 
 class BackgroundMeter:

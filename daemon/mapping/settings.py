@@ -98,8 +98,9 @@ class AcquisitionSettings:
     lrp_background: float = setting(0.7, ge=0.0, le=1.0, doc="...while the LRP is between "
                                     "this (below it counts as background at once)...")
     lrp_max: float = setting(0.85, ge=0.0, le=1.0, doc="...and this")
-    min_distance_m: float = setting(0.75, ge=0.0, le=100.0, doc="travelled at least this "
-                                    "far from the last place before a new one is learned")
+    min_distance_m: float = setting(0.75, ge=0.0, le=100.0, doc="at least this far "
+                                    "from the last place (by odometry, and travelled as far) "
+                                    "before a new one is learned")
     background_window_m: float = setting(3.0, gt=0.0, le=100.0, doc="after the decision, "
                                          "the place's background LRP is the median of its LRP "
                                          "over this far travelled no nearer to the place "
