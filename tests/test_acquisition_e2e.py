@@ -93,4 +93,4 @@ def test_the_daemon_learns_places_on_its_own_as_the_robot_drives(tmp_path: Path)
     assert math.hypot(measured.x - true.x, measured.y - true.y) <= 0.05, (measured, true)
     assert abs(math.degrees(math.remainder(measured.yaw - true.yaw, 2 * math.pi))) <= 1.0
     inverse = SE2(back[0]["x"], back[0]["y"], back[0]["yaw"]).compose(measured)
-    assert math.hypot(inverse.x, inverse.y) <= 1e-6 and abs(inverse.yaw) <= 1e-6
+    assert math.hypot(inverse.x, inverse.y) <= 1e-4 and abs(inverse.yaw) <= 1e-4  # rounded
