@@ -849,8 +849,9 @@ class Localiser:
         for pid, known in self._known.items():
             if pid == exclude or (near is not None and pid not in near):
                 continue
-            lead = self.matcher.lrp(prepared, known.templates) - (
-                s.lrp_background if known.background is None else known.background)
+            # Against its own background, estimated until measured (design §6).
+            lead = self.matcher.lrp(prepared, known.templates) - self._background(
+                known, estimated=True)
             if lead >= best:
                 best, best_id = lead, pid
         return best_id
