@@ -68,7 +68,7 @@ def test_no_decision_without_a_watched_place_or_odometry() -> None:
 
 
 def test_background_meter_takes_the_settled_median() -> None:
-    meter = BackgroundMeter(4, 0.70, window_m=2.0, skip_m=1.0)
+    meter = BackgroundMeter(4, window_m=2.0, skip_m=1.0)
     values = []
     for i in range(1, 100):
         lrp = 0.9 if 0.05 * i < 1.0 else 0.62 + 0.01 * (i % 3)  # not settled in the skip
@@ -102,7 +102,7 @@ def test_background_meter_ignores_the_way_back_past_the_place() -> None:
     """The decision came 1.5 m from the place; the tour turns back past it (where its
     LRP is high) and on 4 m beyond: only the frames at least 1.5 m from the place count."""
     origin = Odometry(0.0, 0.0, 0.0, 0, 0)
-    meter = BackgroundMeter(4, 0.70, window_m=2.0, skip_m=0.5, origin=origin,
+    meter = BackgroundMeter(4, window_m=2.0, skip_m=0.5, origin=origin,
                             min_away_m=1.5)
     xs = [1.5 + 0.05 * i for i in range(1, 11)]  # on 0.5 m, then back the way it came
     xs += [2.0 - 0.05 * i for i in range(1, 121)]  # ...past the place to x = -4
@@ -112,7 +112,7 @@ def test_background_meter_ignores_the_way_back_past_the_place() -> None:
         value = meter.observe(lrp, Odometry(x, 0.0, 0.0, i, i)) if value is None else value
     assert value == pytest.approx(0.64)
     # Without the origin the view near the place is taken for its background.
-    blind = BackgroundMeter(4, 0.70, window_m=2.0, skip_m=0.5)
+    blind = BackgroundMeter(4, window_m=2.0, skip_m=0.5)
     value = None
     for i, x in enumerate(xs):
         lrp = 0.95 - 0.1 * abs(x) if abs(x) < 1.5 else 0.64

@@ -355,14 +355,19 @@ class Localiser:
         the cross estimates on the map's own-view level (daemon/mapping/backgrounds.py)."""
         if known.background is not None:
             return known.background
-        if not estimated:
-            return self.settings.background_lrp
+        estimate = self._estimated_background(known) if estimated else None
+        return self.settings.background_lrp if estimate is None else estimate
+
+    def _estimated_background(self, known: KnownPlace) -> float | None:
+        """Measured, else the search's estimate (daemon/mapping/backgrounds.py); None:
+        the place has neither."""
+        if known.background is not None:
+            return known.background
         known_places = self._known
         if self._levels is None or self._levels[0] is not known_places:
             # The map's levels, made again once it changes (know_place).
             self._levels = (known_places, levels(k.place for k in known_places.values()))
-        estimate = search_background(known.place, self._levels[1])
-        return self.settings.background_lrp if estimate is None else estimate
+        return search_background(known.place, self._levels[1])
 
     # ------------------------------------------------------------------ global (§9)
     def _supervise(self, prepare: Callable[[], PreparedPanorama], grey: np.ndarray,
@@ -783,8 +788,8 @@ class Localiser:
         # The watched place is behind us: measure the level its LRP settles at...
         acq = self.acquisition.settings
         self._meters.append(BackgroundMeter(
-            place_id, decision.background_lrp, acq.background_window_m,
-            acq.background_skip_m, decision.origin, decision.away_m))
+            place_id, acq.background_window_m, acq.background_skip_m, decision.origin,
+            decision.away_m))
         # ...and back on a known path another place may be recognised here (the most
         # likely place, §7.1): watch that one instead of learning.
         known = self._most_likely(prepared, exclude=place_id)
@@ -804,11 +809,7 @@ class Localiser:
         the background measured later (mean absolute error), the map's median within
         0.044 — a place whose background stands high would be left too late."""
         known = self._known.get(place_id)
-        if known is None or (known.background is None
-                             and known.place.background_cross is None
-                             and known.place.background_estimate is None):
-            return None
-        return self._background(known, estimated=True)
+        return None if known is None else self._estimated_background(known)
 
     def _near_estimate(self, within_m: float) -> set[int] | None:
         """The places the map's transitions put within ``within_m`` of the tracked

@@ -28,7 +28,7 @@ from kernel.types import Odometry
 class AcquisitionDecision:
     """Learn a new place here; ``background_lrp`` is the first estimate of the last
     place's background: the LRP here once it has settled (the thesis's rule), or, when the
-    decision comes early (``coverage_margin``), the background the places around here
+    decision comes early (``coverage_margin``), the background the place is expected to
     settle at — the LRP here has not settled yet, and standing in for the background it
     would make the place look unrecognised where it still is."""
 
@@ -72,7 +72,7 @@ class PlaceAcquisition:
         if last is None:
             self.origin = odometry
             return None
-        step = math.hypot(odometry.x - last.x, odometry.y - last.y)
+        step = _apart(odometry, last)
         if step < 1e-4:  # stationary or turning on the spot: no new information
             return None
         self.distance_m += step
@@ -115,9 +115,7 @@ class PlaceAcquisition:
     def _away(self) -> float:
         """How far the robot stands from where it began watching the place (odometry)."""
         origin, here = self.origin, self._last
-        if origin is None or here is None:
-            return 0.0
-        return math.hypot(here.x - origin.x, here.y - origin.y)
+        return 0.0 if origin is None or here is None else _apart(here, origin)
 
     def _decision(self, background: float, lrp: float) -> AcquisitionDecision:
         assert self.place_id is not None
@@ -136,13 +134,11 @@ class BackgroundMeter:
     background (office 1: a place learned 0.30 m from one whose background had been
     measured on the way back over it)."""
 
-    def __init__(self, place_id: int, first_estimate: float, window_m: float,
-                 skip_m: float = 0.0, origin: Odometry | None = None,
-                 min_away_m: float = 0.0) -> None:
+    def __init__(self, place_id: int, window_m: float, skip_m: float = 0.0,
+                 origin: Odometry | None = None, min_away_m: float = 0.0) -> None:
         self.place_id = place_id
         self.window_m = window_m
         self.skip_m = skip_m
-        self.first_estimate = first_estimate
         self.origin = origin
         self.min_away_m = min_away_m
         self.samples: list[float] = []
@@ -158,7 +154,7 @@ class BackgroundMeter:
         last, self._last = self._last, odometry
         if last is None:
             return None
-        step = math.hypot(odometry.x - last.x, odometry.y - last.y)
+        step = _apart(odometry, last)
         if step < 1e-4:
             return None
         self.distance_m += step
@@ -171,5 +167,9 @@ class BackgroundMeter:
         return float(sorted(self.samples)[len(self.samples) // 2])
 
     def _away(self, odometry: Odometry) -> bool:
-        return self.origin is None or math.hypot(
-            odometry.x - self.origin.x, odometry.y - self.origin.y) >= self.min_away_m
+        return self.origin is None or _apart(odometry, self.origin) >= self.min_away_m
+
+
+def _apart(a: Odometry, b: Odometry) -> float:
+    """The distance between two odometry positions, metres."""
+    return math.hypot(a.x - b.x, a.y - b.y)

@@ -181,15 +181,18 @@ class Mapper:
             others = [q for q in ids if q != place_id]
             full, grown = [place_id], {}
             for q in others:
-                before, after = views_of(q, others), views_of(q, ids)
                 cross = self.graph.place(q).background_cross
                 if cross is None:
                     full.append(q)
-                elif after != before:
-                    if sorted([*before, place_id]) == sorted(after):
-                        grown[q] = (cross, len(before))
-                    else:
-                        full.append(q)
+                    continue
+                after = views_of(q, ids)
+                if place_id not in after:
+                    continue  # its views are as they were
+                before = views_of(q, others)
+                if sorted([*before, place_id]) == after:
+                    grown[q] = (cross, len(before))
+                else:  # the new view pushed another out
+                    full.append(q)
         if len(ids) < 2:
             return []
         return self._store_cross_backgrounds(full) + self._grow_cross_backgrounds(
