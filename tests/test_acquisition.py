@@ -8,7 +8,12 @@ import math
 
 import pytest
 
-from daemon.mapping.acquisition import AcquisitionDecision, BackgroundMeter, PlaceAcquisition
+from daemon.mapping.acquisition import (
+    AcquisitionDecision,
+    BackgroundMeter,
+    PlaceAcquisition,
+    taken_over,
+)
 from daemon.mapping.settings import AcquisitionSettings
 from kernel.types import Odometry
 
@@ -147,3 +152,39 @@ def test_an_early_decision_estimates_the_background_as_the_places_around() -> No
     assert decision is not None and decision.place_id == 6
     assert decision.background_lrp == pytest.approx(acq.smoothed_lrp)
     assert decision.background_lrp == pytest.approx(0.74, abs=0.02)
+
+
+def test_a_known_place_is_taken_over_only_if_it_would_be_kept() -> None:
+    """Back on a known path, the decision watches the known place standing highest above
+    its background instead of learning — only if it stands by the coverage margin too:
+    below it, the place would be left again as soon as the robot is min_distance_m on."""
+    assert SETTINGS.coverage_margin > SETTINGS.recognition_margin
+    between = (SETTINGS.coverage_margin + SETTINGS.recognition_margin) / 2
+    assert taken_over({3: between, 4: between - 0.01}, SETTINGS) is None
+    assert taken_over({3: between, 4: SETTINGS.coverage_margin + 0.01}, SETTINGS) == 4
+    assert taken_over({}, SETTINGS) is None
+    thesis = AcquisitionSettings(enabled=True, coverage_margin=0.0)  # the thesis's rule
+    assert taken_over({3: between, 4: between - 0.01}, thesis) == 3
+
+
+def test_the_early_decision_follows_the_lrp_here_not_half_a_window_behind() -> None:
+    """An LRP falling to its background over 0.7 m (1/e) crosses the coverage margin at
+    0.7 ln(0.21 / 0.08) = 0.68 m: the decision comes as min_distance_m allows (0.75 m).
+    The thesis's 0.5 m average, 0.25 m behind, crosses it only at 0.94 m."""
+    def lrp(x: float) -> float:
+        return 0.74 + 0.21 * math.exp(-x / 0.7)
+
+    def decide(settings: AcquisitionSettings) -> float | None:
+        acq = PlaceAcquisition(settings)
+        acq.reset(5, expected_background=0.74)
+        for i in range(1, 500):
+            x = 0.01 * i
+            decision = acq.observe(lrp(x), Odometry(x, 0.0, 0.0, i, i))
+            if decision is not None:
+                return decision.distance_m
+        return None
+
+    here = decide(SETTINGS)
+    assert here is not None and here <= SETTINGS.min_distance_m + 2 * SETTINGS.sample_step_m
+    lagging = decide(AcquisitionSettings(enabled=True, coverage_window_m=SETTINGS.window_m))
+    assert lagging is not None and lagging >= 0.9

@@ -8,7 +8,12 @@ import numpy as np
 import pytest
 
 from daemon.localisation.belief import PlaceScore
-from daemon.localisation.place_switching import CycleClosure, PlaceSwitcher, places_near
+from daemon.localisation.place_switching import (
+    CycleClosure,
+    PlaceSwitcher,
+    nearest_place,
+    places_near,
+)
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.odometry_chain import OdometryChain
 from daemon.mapping.settings import OdometryNoiseSettings
@@ -149,3 +154,25 @@ def test_acquisition_takes_back_only_places_the_map_puts_near_the_estimate() -> 
     assert 6 in places_near(1, (0.5, 0.0, 0.0), loose, within_m=3.0)
     # The current place itself only while the estimate is within the gate of it.
     assert 1 not in places_near(1, (4.0, 0.0, 0.0), through, within_m=3.0)
+
+
+def test_the_place_nearest_an_estimate_by_the_map() -> None:
+    """Acquisition learns no place nearer than min_distance_m to a known one: the
+    nearest by the map's transitions is found whichever place the estimate is in."""
+    step = UncertainSE2(SE2(1.0, 0.0, 0.0), np.diag([1e-4, 1e-4, 1e-6]))
+    through = {0: step.inverse(), 2: step, 3: step.compose(step)}  # T_1_p: 0, (1), 2, 3
+
+    def nearest(pose: tuple[float, float, float], links: dict[int, UncertainSE2],
+                current: int = 1, exclude: int | None = None) -> tuple[int, float] | None:
+        found = nearest_place(current, pose, links, exclude)
+        return None if found is None else (found[0], round(found[1], 6))
+
+    assert nearest((0.2, 0.1, 0.0), through) == (1, round(math.hypot(0.2, 0.1), 6))
+    assert nearest((1.3, 0.0, 0.0), through) == (2, 0.3)  # place 2 at 1 m, 3 at 2 m
+    assert nearest((1.8, 0.0, 0.0), through) == (3, 0.2)
+    assert nearest((-0.6, 0.0, 0.0), through) == (0, 0.4)
+    assert nearest((0.0, 0.0, 0.0), {}) == (1, 0.0)
+    # The watched place left out: odometry has already put the robot far enough from it.
+    assert nearest((0.2, 0.1, 0.0), through, exclude=1) == (2, round(math.hypot(0.8, 0.1), 6))
+    assert nearest((0.1, 0.0, 0.0), {1: step.inverse()}, current=2, exclude=2) == (1, 1.1)
+    assert nearest((0.0, 0.0, 0.0), {}, exclude=1) is None

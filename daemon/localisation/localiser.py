@@ -44,10 +44,21 @@ from daemon.localisation.belief import (
 from daemon.localisation.global_localisation import LeadWatch, LossDetector, PlaceSearch
 from daemon.localisation.local_positioning import LocalResult, PlaceTracker
 from daemon.localisation.odometry import OdometryBuffer, relative_motion
-from daemon.localisation.place_switching import CycleClosure, PlaceSwitcher, places_near, reliable
+from daemon.localisation.place_switching import (
+    CycleClosure,
+    PlaceSwitcher,
+    nearest_place,
+    places_near,
+    reliable,
+)
 from daemon.localisation.sensor_models import make_model
 from daemon.localisation.settings import LocalisationSettings
-from daemon.mapping.acquisition import AcquisitionDecision, BackgroundMeter, PlaceAcquisition
+from daemon.mapping.acquisition import (
+    AcquisitionDecision,
+    BackgroundMeter,
+    PlaceAcquisition,
+    taken_over,
+)
 from daemon.mapping.backgrounds import Levels, levels, search_background
 from daemon.mapping.odometry_chain import OdometryChain
 from daemon.mapping.place import Place
@@ -793,6 +804,8 @@ class Localiser:
         # ...and back on a known path another place may be recognised here (the most
         # likely place, §7.1): watch that one instead of learning.
         known = self._most_likely(prepared, exclude=place_id)
+        if known is None:
+            known = self._crowded(acq.min_distance_m, exclude=place_id)
         if known is not None:
             self._watched = (known, self._known[known].templates)
             self.acquisition.reset(known)
@@ -810,6 +823,23 @@ class Localiser:
         0.044 — a place whose background stands high would be left too late."""
         known = self._known.get(place_id)
         return None if known is None else self._estimated_background(known)
+
+    def _crowded(self, within_m: float, exclude: int) -> int | None:
+        """The place the map puts nearest the tracked estimate, if nearer than
+        ``within_m``: no new place is learned there, that one is watched instead —
+        ``min_distance_m`` holds for every place, not only the last (corridor 1's way back
+        learned places 0.23 m from known ones standing too little above their high,
+        aliased backgrounds to be taken over). The watched place ``exclude`` is left out:
+        odometry has put the robot far enough from it, where the tracked estimate may lag
+        by centimetres. None: not tracking, or no place so near."""
+        tracker = self.tracker
+        if tracker is None or tracker.estimate is None or self.mode != "track":
+            return None
+        current = tracker.place.id
+        through = self._through_graph(current, max_places=len(self._known))
+        nearest = nearest_place(current, tracker.estimate.pose, through, exclude)
+        return nearest[0] if nearest is not None and nearest[1] < within_m \
+            and nearest[0] in self._known else None
 
     def _near_estimate(self, within_m: float) -> set[int] | None:
         """The places the map's transitions put within ``within_m`` of the tracked
@@ -841,21 +871,14 @@ class Localiser:
         return tuple(done)
 
     def _most_likely(self, prepared: PreparedPanorama, exclude: int) -> int | None:
-        """The known place whose LRP stands highest above its background here, if that
-        is by the acquisition's recognition margin (§9.2: LRP minus background)."""
+        """The known place to watch instead of learning a new one here, if any
+        (``taken_over``): each place's lead is its LRP minus its own background,
+        estimated until measured (§9.2, design §6)."""
         assert self.acquisition is not None
-        s = self.acquisition.settings
-        near = self._near_estimate(s.known_within_m)
-        best, best_id = s.recognition_margin, None
-        for pid, known in self._known.items():
-            if pid == exclude or (near is not None and pid not in near):
-                continue
-            # Against its own background, estimated until measured (design §6).
-            lead = self.matcher.lrp(prepared, known.templates) - self._background(
-                known, estimated=True)
-            if lead >= best:
-                best, best_id = lead, pid
-        return best_id
+        near = self._near_estimate(self.acquisition.settings.known_within_m)
+        ids = [p for p in self._known if p != exclude and (near is None or p in near)]
+        scores = self._score_many(prepared, ids, estimated=True)
+        return taken_over({sc.place_id: sc.lead for sc in scores}, self.acquisition.settings)
 
 
 def _merged(*groups: tuple[PlaceScore, ...] | list[PlaceScore]) -> tuple[PlaceScore, ...]:

@@ -122,6 +122,21 @@ def places_near(current: int, pose: tuple[float, float, float],
     return near
 
 
+def nearest_place(current: int, pose: tuple[float, float, float],
+                  through: dict[int, UncertainSE2], exclude: int | None = None
+                  ) -> tuple[int, float] | None:
+    """The place but ``exclude`` whose reference the map puts nearest ``pose`` (an
+    estimate in place ``current``; ``through``: T_current_p), and how far, metres (the
+    means, no drift); None: no other place."""
+    x, y = pose[0], pose[1]
+    best = None if current == exclude else (current, math.hypot(x, y))
+    for pid, T in through.items():
+        d = math.hypot(T.mean.x - x, T.mean.y - y)
+        if pid != exclude and pid != current and (best is None or d < best[1]):
+            best = (pid, d)
+    return best
+
+
 def reliable(covariance: np.ndarray, confidence: float, s: LocalisationSettings) -> bool:
     """An estimate to build on: its xy std within ``reliable_sigma_m`` and its confidence
     at least ``reliable_confidence`` (a cycle's transition, a new place's link)."""

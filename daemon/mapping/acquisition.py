@@ -9,9 +9,9 @@ maximum (0.85); an LRP below 0.7 is background at once. Here the samples are tak
 against *distance travelled* (odometry), not frames, so the robot's speed does not change
 the decision; frames while stationary or only turning add nothing. Once the place's
 background can be estimated (daemon/mapping/backgrounds.py), a new place is learned a
-little earlier, while the last one still stands ``coverage_margin`` above it: the
-background rule alone leaves a stretch before each new place where no place is
-recognised.
+little earlier, while the last one still stands ``coverage_margin`` above it (its LRP
+averaged over ``coverage_window_m``, far less than the thesis's window): the background
+rule alone leaves a stretch before each new place where no place is recognised.
 """
 
 from __future__ import annotations
@@ -102,9 +102,15 @@ class PlaceAcquisition:
         # Beyond the thesis: learn the next place while this one is still recognised, by
         # ``coverage_margin`` above the background it is expected to settle at, so the
         # map leaves no stretch where no place stands out.
+        # The LRP here, over a short window: the thesis's average over window_m lags
+        # half a window behind, and where a place is recognised only ~0.45 m about it
+        # (corridor 1: down from 0.79 to 0.73, 0.05 under the mark, while the average
+        # came down to it) the next place came too late.
+        k = max(1, min(len(self._lrp), int(round(s.coverage_window_m / s.sample_step_m))))
+        recent = sum(list(self._lrp)[-k:]) / k
         expected = self.expected_background
         if expected is not None and s.coverage_margin > 0 \
-                and m < expected + s.coverage_margin:
+                and recent < expected + s.coverage_margin:
             return self._decision(min(m, expected), m)
         slope = self.smoothed_slope
         if slope is not None and len(self._slope) == self._n and slope < s.slope_threshold \
@@ -121,6 +127,18 @@ class PlaceAcquisition:
         assert self.place_id is not None
         return AcquisitionDecision(self.place_id, background, self.distance_m, lrp,
                                    self.origin, self._away())
+
+
+def taken_over(leads: dict[int, float], settings: AcquisitionSettings) -> int | None:
+    """When a decision comes back on a known path (§7.1: the most likely place): the
+    known place whose lead (LRP minus its background, by place id) is highest, if it is
+    by the recognition margin — and by the coverage margin, for a place taken over below
+    it would be left again as soon as the robot is ``min_distance_m`` on (corridor 1: a
+    place 2.8 m behind, taken over at a lead of 0.055 in the aliased corridor, left a
+    2.6 m gap between places). None: learn a new place here."""
+    need = max(settings.recognition_margin, settings.coverage_margin)
+    best = max(leads, key=lambda p: leads[p], default=None)
+    return best if best is not None and leads[best] >= need else None
 
 
 class BackgroundMeter:

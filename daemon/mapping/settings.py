@@ -100,6 +100,7 @@ class AcquisitionSettings:
     lrp_max: float = setting(0.85, ge=0.0, le=1.0, doc="...and this")
     min_distance_m: float = setting(0.75, ge=0.0, le=100.0, doc="at least this far "
                                     "from the last place (by odometry, and travelled as far) "
+                                    "and from any the map puts near the tracked estimate "
                                     "before a new one is learned")
     background_window_m: float = setting(3.0, gt=0.0, le=100.0, doc="after the decision, "
                                          "the place's background LRP is the median of its LRP "
@@ -111,10 +112,13 @@ class AcquisitionSettings:
                                      "while the last one's LRP is still this far above the "
                                      "background it is estimated to settle at (0: the "
                                      "thesis's rule alone)")
+    coverage_window_m: float = setting(0.15, gt=0.0, le=10.0, doc="...the LRP averaged "
+                                       "over this far travelled (window_m's average lags "
+                                       "half a window behind)")
     recognition_margin: float = setting(0.05, ge=0.0, le=1.0, doc="when the background is "
                                         "reached, a known place whose LRP is this far above "
-                                        "its own background is watched instead of learning "
-                                        "a new one (back on a known path)")
+                                        "its own background (and coverage_margin) is watched "
+                                        "instead of learning a new one (back on a known path)")
     known_within_m: float = setting(3.0, gt=0.0, le=100.0, doc="...if, while tracking, "
                                     "the map's transitions put its reference within this "
                                     "of the estimate (2 sigma of the path's drift allowed; "

@@ -22,6 +22,7 @@ first pass drove the whole tour: False only if it ran out of time).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import functools
 import json
@@ -29,7 +30,7 @@ import math
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
@@ -66,9 +67,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="[mapping.acquisition] coverage_margin (default: the configured)")
     p.add_argument("--map", type=Path, help="keep the first pass's map (and its references) "
                    "here and reuse it when built before with the same world and settings")
-    p.add_argument("--trace", type=Path, help="write each second-pass frame here (JSON "
-                   "lines: true pose, covered, best place and lead, nearest place's LRP "
-                   "and background)")
+    p.add_argument("--trace", type=Path, help="write each frame here (JSON lines). First "
+                   "pass (\"pass\": 1): true pose, the watched place, its LRP raw and "
+                   "smoothed, the background it is expected to settle at, the decision. "
+                   "Second pass (\"pass\": 2): true pose, covered, best place and lead, "
+                   "nearest place's LRP and background")
 
 
 def _world(args: argparse.Namespace) -> str:
@@ -103,13 +106,14 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     key = json.dumps({"world": _world(args), "speed": args.speed, "laps": args.laps,
                       "frame_rate": args.frame_rate, "seed": args.seed,
                       "acquisition": dataclasses.asdict(cfg.mapping.acquisition)})
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp, \
+            (args.trace.open("w") if args.trace else contextlib.nullcontext()) as trace:
         map_path = args.map or Path(tmp) / "map.db"
         kept = _kept(map_path, key) if args.map else None
         if kept is None:
             for stale in (map_path, *_beside(map_path)):
                 stale.unlink(missing_ok=True)
-            places, refs, stats = _first_pass(cfg, scenario, map_path)
+            places, refs, stats = _first_pass(cfg, scenario, map_path, trace)
             if args.map:
                 _references(map_path).write_text(json.dumps(
                     {"key": key, "references": refs, "stats": stats}))
@@ -118,7 +122,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             with MapStore.open(map_path, geometry_checksum(cfg.mirror, cfg.panorama),
                                readonly=True) as store:
                 places = store.load().places
-        coverage, frames = _second_pass(cfg, scenario, places, refs, args)
+        coverage, frames = _second_pass(cfg, scenario, places, refs, args, trace)
     spacing = min((math.dist(a[:2], b[:2]) for i, a in enumerate(refs) for b in refs[i + 1:]),
                   default=float("nan"))
     return {
@@ -162,7 +166,8 @@ def _kept(map_path: Path, key: str
     return [tuple(r) for r in data["references"]], data["stats"]
 
 
-def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path
+def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
+                trace: IO[str] | None = None
                 ) -> tuple[list[Place], list[tuple[float, float, float]], dict[str, Any]]:
     t_wall = time.perf_counter()
     camera, base, robot = _devices(cfg, scenario)
@@ -191,6 +196,8 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path
             path_m += math.dist(pose[:2], last_pose[:2])
             last_pose = pose
             belief = localiser.process_frame(frame)
+            if trace is not None:
+                trace.write(json.dumps(_traced_first(pose, path_m, belief, localiser)) + "\n")
             if belief.closed_transition is not None:
                 mapper.add_transition(belief.closed_transition)
             for place_id, background in belief.backgrounds:
@@ -232,6 +239,26 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path
                           "tour_done": tour_done, "wall_s": time.perf_counter() - t_wall}
 
 
+def _traced_first(pose: tuple[float, float, float], path_m: float, belief: Any,
+                  localiser: Localiser) -> dict[str, Any]:
+    """One first-pass frame: the true pose and what the acquisition made of it."""
+    acq = localiser.acquisition
+    assert acq is not None
+
+    def r(v: float | None) -> float | None:
+        return None if v is None else round(v, 4)
+
+    decision = belief.acquisition
+    return {"pass": 1, "x": round(pose[0], 3), "y": round(pose[1], 3),
+            "path_m": round(path_m, 3), "watched": belief.recent_place,
+            "lrp": r(belief.recent_place_lrp), "smoothed": r(acq.smoothed_lrp),
+            "expected": r(acq.expected_background), "distance_m": r(acq.distance_m),
+            "decision": None if decision is None else {
+                "place": decision.place_id, "background": r(decision.background_lrp),
+                "lrp": r(decision.lrp)},
+            "backgrounds": [[p, r(b)] for p, b in belief.backgrounds]}
+
+
 def _begin(mapper: Mapper, link: list[Link | None], localiser: Localiser, start: Any
            ) -> None:
     link.append(mapper.begin_place(start, localiser.reliable_estimate()))
@@ -244,8 +271,8 @@ def _reference_pose(robot: SimRobot) -> tuple[float, float, float]:
 
 
 def _second_pass(cfg: PlacecellConfig, scenario: Scenario, places: list[Place],
-                 refs: list[tuple[float, float, float]], args: argparse.Namespace
-                 ) -> tuple[float, int]:
+                 refs: list[tuple[float, float, float]], args: argparse.Namespace,
+                 trace: IO[str] | None = None) -> tuple[float, int]:
     """Coverage of the tour by the finished map."""
     if not places:
         return 0.0, 0
@@ -255,7 +282,6 @@ def _second_pass(cfg: PlacecellConfig, scenario: Scenario, places: list[Place],
         localiser.know_place(place)
     rng = np.random.default_rng(args.seed)
     covered = total = 0
-    trace = args.trace.open("w") if args.trace else None
     step_ns = int(1e9 / 50)
     last = robot.true_pose()
     run = args.every_m
@@ -277,8 +303,6 @@ def _second_pass(cfg: PlacecellConfig, scenario: Scenario, places: list[Place],
         total += 1
         if trace is not None:
             trace.write(json.dumps(_traced(pose, scores, refs, places, args.margin)) + "\n")
-    if trace is not None:
-        trace.close()
     return covered / max(total, 1), total
 
 
@@ -288,7 +312,7 @@ def _traced(pose: tuple[float, float, float], scores: tuple[Any, ...],
     """One second-pass frame: the true pose, the best place's lead, and the nearest
     place (by true distance) with its LRP and background here."""
     best = max(scores, key=lambda sc: sc.lead, default=None)
-    out: dict[str, Any] = {"x": round(pose[0], 3), "y": round(pose[1], 3),
+    out: dict[str, Any] = {"pass": 2, "x": round(pose[0], 3), "y": round(pose[1], 3),
                            "yaw": round(pose[2], 4),
                            "covered": best is not None and best.lead >= margin,
                            "best": None if best is None else best.place_id,
