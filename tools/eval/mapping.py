@@ -69,7 +69,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "here and reuse it when built before with the same world and settings")
     p.add_argument("--trace", type=Path, help="write each frame here (JSON lines). First "
                    "pass (\"pass\": 1): true pose, the watched place, its LRP raw and "
-                   "smoothed, the background it is expected to settle at, the decision. "
+                   "smoothed, the background it is expected to settle at, the decision, the "
+                   "belief's state, place and pose. "
                    "Second pass (\"pass\": 2): true pose, covered, best place and lead, "
                    "nearest place's LRP and background")
 
@@ -241,7 +242,8 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
 
 def _traced_first(pose: tuple[float, float, float], path_m: float, belief: Any,
                   localiser: Localiser) -> dict[str, Any]:
-    """One first-pass frame: the true pose and what the acquisition made of it."""
+    """One first-pass frame: the true pose, what the acquisition made of it, and where
+    the Localiser puts the robot."""
     acq = localiser.acquisition
     assert acq is not None
 
@@ -256,7 +258,10 @@ def _traced_first(pose: tuple[float, float, float], path_m: float, belief: Any,
             "decision": None if decision is None else {
                 "place": decision.place_id, "background": r(decision.background_lrp),
                 "lrp": r(decision.lrp)},
-            "backgrounds": [[p, r(b)] for p, b in belief.backgrounds]}
+            "backgrounds": [[p, r(b)] for p, b in belief.backgrounds],
+            "state": belief.state, "place": belief.place_id,
+            "pose_in_place": None if belief.pose_in_place is None else [
+                round(v, 3) for v in belief.pose_in_place]}
 
 
 def _begin(mapper: Mapper, link: list[Link | None], localiser: Localiser, start: Any
