@@ -154,23 +154,17 @@ def test_an_early_decision_estimates_the_background_as_the_places_around() -> No
     assert decision.background_lrp == pytest.approx(0.74, abs=0.02)
 
 
-def test_a_known_place_is_taken_over_if_it_would_be_kept_or_stands_too_close() -> None:
+def test_a_known_place_is_taken_over_only_if_it_would_be_kept() -> None:
     """Back on a known path, the decision watches the known place standing highest above
-    its background instead of learning: if it stands by the coverage margin (below it,
-    the place would be left again as soon as the robot is min_distance_m on), or by the
-    recognition margin where the map may put it within min_distance_m."""
+    its background instead of learning — only if it stands by the coverage margin too:
+    below it, the place would be left again as soon as the robot is min_distance_m on."""
     assert SETTINGS.coverage_margin > SETTINGS.recognition_margin
     between = (SETTINGS.coverage_margin + SETTINGS.recognition_margin) / 2
-    strong = SETTINGS.coverage_margin + 0.01
-    assert taken_over({3: between, 4: between - 0.01}, SETTINGS, close=set()) is None
-    assert taken_over({3: between, 4: strong}, SETTINGS, close=set()) == 4
-    assert taken_over({3: between, 4: between - 0.01}, SETTINGS, close={4}) == 4
-    assert taken_over({3: between, 4: strong}, SETTINGS, close={3}) == 4  # strong first
-    assert taken_over({3: between}, SETTINGS) == 3  # the map cannot tell: any may be close
-    assert taken_over({3: SETTINGS.recognition_margin - 0.01}, SETTINGS) is None
+    assert taken_over({3: between, 4: between - 0.01}, SETTINGS) is None
+    assert taken_over({3: between, 4: SETTINGS.coverage_margin + 0.01}, SETTINGS) == 4
     assert taken_over({}, SETTINGS) is None
     thesis = AcquisitionSettings(enabled=True, coverage_margin=0.0)  # the thesis's rule
-    assert taken_over({3: between, 4: between - 0.01}, thesis, close=set()) == 3
+    assert taken_over({3: between, 4: between - 0.01}, thesis) == 3
 
 
 def test_the_early_decision_follows_the_lrp_here_not_half_a_window_behind() -> None:

@@ -875,12 +875,10 @@ class Localiser:
         (``taken_over``): each place's lead is its LRP minus its own background,
         estimated until measured (§9.2, design §6)."""
         assert self.acquisition is not None
-        s = self.acquisition.settings
-        near = self._near_estimate(s.known_within_m)
+        near = self._near_estimate(self.acquisition.settings.known_within_m)
         ids = [p for p in self._known if p != exclude and (near is None or p in near)]
         scores = self._score_many(prepared, ids, estimated=True)
-        return taken_over({sc.place_id: sc.lead for sc in scores}, s,
-                          close=self._near_estimate(s.min_distance_m))
+        return taken_over({sc.place_id: sc.lead for sc in scores}, self.acquisition.settings)
 
 
 def _merged(*groups: tuple[PlaceScore, ...] | list[PlaceScore]) -> tuple[PlaceScore, ...]:

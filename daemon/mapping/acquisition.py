@@ -129,28 +129,16 @@ class PlaceAcquisition:
                                    self.origin, self._away())
 
 
-def taken_over(leads: dict[int, float], settings: AcquisitionSettings,
-               close: set[int] | None = None) -> int | None:
-    """When a decision comes back on a known path (§7.1: the most likely place), the known
-    place to watch instead of learning a new one; None: learn a new place here.
-    ``leads``: LRP minus its own background, by place id; ``close``: the places the map
-    may put within ``min_distance_m`` (None: it cannot tell, any may be).
-
-    The place with the highest lead if it stands by the coverage margin: one taken over
-    below it would be left again as soon as the robot is ``min_distance_m`` on (corridor
-    1: a place 2.8 m behind, taken over at a lead of 0.055 in the aliased corridor, left a
-    2.6 m gap between places). Else one standing by the recognition margin only if it
-    may be that close — a new place learned here would be too near it (office 1: a place
-    learned 0.10 m from one passed the other way, not taken over by the coverage margin)."""
-    def best(among: dict[int, float], need: float) -> int | None:
-        p = max(among, key=lambda k: among[k], default=None)
-        return p if p is not None and among[p] >= need else None
-
-    strong = best(leads, max(settings.recognition_margin, settings.coverage_margin))
-    if strong is not None:
-        return strong
-    return best({p: lead for p, lead in leads.items() if close is None or p in close},
-                settings.recognition_margin)
+def taken_over(leads: dict[int, float], settings: AcquisitionSettings) -> int | None:
+    """When a decision comes back on a known path (§7.1: the most likely place): the
+    known place whose lead (LRP minus its background, by place id) is highest, if it is
+    by the recognition margin — and by the coverage margin, for a place taken over below
+    it would be left again as soon as the robot is ``min_distance_m`` on (corridor 1: a
+    place 2.8 m behind, taken over at a lead of 0.055 in the aliased corridor, left a
+    2.6 m gap between places). None: learn a new place here."""
+    need = max(settings.recognition_margin, settings.coverage_margin)
+    best = max(leads, key=lambda p: leads[p], default=None)
+    return best if best is not None and leads[best] >= need else None
 
 
 class BackgroundMeter:
