@@ -104,8 +104,8 @@ class PlaceAcquisition:
         # map leaves no stretch where no place stands out.
         # The LRP here, over a short window: the thesis's average over window_m lags
         # half a window behind, and where a place is recognised only ~0.45 m about it
-        # (corridor 1: down from 0.79 to 0.73, 0.05 under the mark, while the average
-        # came down to it) the next place came too late.
+        # the next place came too late (corridor 1: the LRP here was 0.73, under the
+        # expected background of 0.75, by the time the average came down to 0.83).
         k = max(1, min(len(self._lrp), int(round(s.coverage_window_m / s.sample_step_m))))
         recent = sum(list(self._lrp)[-k:]) / k
         expected = self.expected_background
