@@ -488,6 +488,10 @@ def test_make_run_learns_places_on_its_own_and_tracks_within_two_minutes(
             # with the transition between them, and measures the first one's background.
             assert wait_for(lambda: len(places()) >= 2
                             and places()[0]["background_lrp"] is not None, 120, 1.0), places()
+            # ...and the pose is tracked in the new place too (the follower may lag the
+            # daemon by a few poses on a loaded machine).
+            assert wait_for(lambda: 2 in {p["place"]["id"] for p in read_json_lines(pose_file)
+                                          if p.get("state") == "tracking"}, 60, 1.0)
         finally:
             follower.terminate()
             follower.wait(timeout=30)
