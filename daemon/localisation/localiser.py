@@ -832,12 +832,11 @@ class Localiser:
         aliased backgrounds to be taken over). The watched place ``exclude`` is left out:
         odometry has put the robot far enough from it, where the tracked estimate may lag
         by centimetres. None: not tracking, or no place so near."""
-        tracker = self.tracker
-        if tracker is None or tracker.estimate is None or self.mode != "track":
+        around = self._estimate_in_map()
+        if around is None:
             return None
-        current = tracker.place.id
-        through = self._through_graph(current, max_places=len(self._known))
-        nearest = nearest_place(current, tracker.estimate.pose, through, exclude)
+        current, pose, through = around
+        nearest = nearest_place(current, pose, through, exclude)
         return nearest[0] if nearest is not None and nearest[1] < within_m \
             and nearest[0] in self._known else None
 
@@ -845,13 +844,23 @@ class Localiser:
         """The places the map's transitions put within ``within_m`` of the tracked
         estimate, and those no path of transitions reaches (nothing to rule them out);
         None: not tracking, nothing to go by."""
+        around = self._estimate_in_map()
+        if around is None:
+            return None
+        current, pose, through = around
+        unreached = {p for p in self._known if p != current and p not in through}
+        return unreached | places_near(current, pose, through, within_m)
+
+    def _estimate_in_map(self) -> tuple[int, tuple[float, float, float],
+                                        dict[int, UncertainSE2]] | None:
+        """The tracked place, the estimate in it, and T_current_p of every place the
+        map's transitions reach from it; None: not tracking."""
         tracker = self.tracker
         if tracker is None or tracker.estimate is None or self.mode != "track":
             return None
         current = tracker.place.id
-        through = self._through_graph(current, max_places=len(self._known))
-        unreached = {p for p in self._known if p != current and p not in through}
-        return unreached | places_near(current, tracker.estimate.pose, through, within_m)
+        return current, tracker.estimate.pose, self._through_graph(
+            current, max_places=len(self._known))
 
     def _measure_backgrounds(self, prepared: PreparedPanorama, odo: Odometry | None
                              ) -> tuple[tuple[int, float], ...]:
