@@ -167,6 +167,18 @@ def test_a_known_place_is_taken_over_only_if_it_would_be_kept() -> None:
     assert taken_over({3: between, 4: between - 0.01}, thesis) == 3
 
 
+def test_a_place_the_map_puts_far_is_taken_over_only_when_certain() -> None:
+    """Outside the places the map puts near the estimate, a look-alike is no path back —
+    but a place standing ``certain_lead`` above its background is where the robot is,
+    whatever the map's drift says (office 1 learned a place 0.06 m from one at a lead
+    of 0.22 that a long chain of transitions put far away)."""
+    strong = SETTINGS.coverage_margin + 0.01
+    assert taken_over({3: strong}, SETTINGS, near={4}) is None
+    assert taken_over({3: strong, 4: strong - 0.005}, SETTINGS, near={4}) == 4
+    assert taken_over({3: SETTINGS.certain_lead, 4: strong}, SETTINGS, near={4}) == 3
+    assert taken_over({3: strong}, SETTINGS, near=None) == 3  # not tracking: no map to go by
+
+
 def test_the_early_decision_follows_the_lrp_here_not_half_a_window_behind() -> None:
     """An LRP falling to its background over 0.7 m (1/e) crosses the coverage margin at
     0.7 ln(0.21 / 0.08) = 0.68 m: the decision comes as min_distance_m allows (0.75 m).

@@ -53,12 +53,12 @@ def test_the_mapper_measures_each_place_in_the_others_views(tmp_path: Path) -> N
     places = [synthetic_place(rng, label) for label in ("a", "b", "c")]
     with MapStore.open(tmp_path / "map.db", "abc123") as store:
         mapper = Mapper(store, OdometryNoiseSettings())
-        first, _ = mapper.add_place(places[0], None)
+        first, _ = mapper.add_place(places[0], [])
         assert mapper.measure_cross_backgrounds(first.id) == []  # no other view yet
         assert store.load().place(first.id).background_cross is None
         ids = [first.id]
         for place in places[1:]:
-            stored, _ = mapper.add_place(place, None)
+            stored, _ = mapper.add_place(place, [])
             ids.append(stored.id)
             changed = mapper.measure_cross_backgrounds(stored.id)
             assert sorted(p.id for p in changed) == ids  # every view set it joins
@@ -85,7 +85,7 @@ def test_a_new_view_is_added_to_the_means_it_joins_and_a_full_set_is_left_alone(
         mapper = Mapper(store, OdometryNoiseSettings())
         ids, changes = [], []
         for place in places:
-            stored, _ = mapper.add_place(place, None)
+            stored, _ = mapper.add_place(place, [])
             ids.append(stored.id)
             changes.append(sorted(p.id for p in mapper.measure_cross_backgrounds(stored.id)))
         assert changes == [[], ids[:2], ids[:3], [ids[3]], [ids[4]]]

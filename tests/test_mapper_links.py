@@ -1,6 +1,7 @@
 """How the daemon joins a place being learned to the last one (design §6): the odometry
 between the two reference poses, fused with the localiser's estimate when the two agree,
-and never with an estimate the odometry contradicts."""
+and never with an estimate the odometry contradicts; learned while tracked in another
+place of the map, joined to that place too (a cycle closed where the robot came back)."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ def _driven(mapper: Mapper, metres: float) -> Odometry:
     """Learn a place at the odometry origin, then drive ``metres`` along x at 50 Hz."""
     start = Odometry(0.0, 0.0, 0.0, 1_000_000_000, 0)
     mapper.begin_place(start)
-    mapper.add_place(synthetic_place(np.random.default_rng(1), "dock"), None)
+    mapper.add_place(synthetic_place(np.random.default_rng(1), "dock"), [])
     samples = [Odometry(metres * k / 100, 0.0, 0.0, start.stamp_ns + k * 20_000_000, k)
                for k in range(1, 101)]
     mapper.on_odometry(samples)
@@ -32,16 +33,42 @@ def test_a_seen_pose_agreeing_with_odometry_is_fused_one_it_contradicts_is_not(
     with MapStore.open(tmp_path / "map.db", "abc123") as store:
         mapper = Mapper(store, OdometryNoiseSettings())
         here = _driven(mapper, 2.0)
-        alone = mapper.begin_place(here)
-        assert alone is not None and alone.source == "odometry"
+        [alone] = mapper.begin_place(here)
+        assert alone.source == "odometry"
         assert alone.T_from_new.mean.x == 2.0
         near = UncertainSE2(SE2(2.03, 0.01, 0.0), np.diag([0.02, 0.02, 0.01]) ** 2)
-        fused = mapper.begin_place(here, (1, near))
-        assert fused is not None and fused.source == "vision"
+        [fused] = mapper.begin_place(here, (1, near))
+        assert fused.source == "vision"
         assert 2.0 < fused.T_from_new.mean.x < 2.03
         assert fused.T_from_new.covariance[0, 0] < alone.T_from_new.covariance[0, 0]
         # Confident and 3 m / 160° away (a tracker locked onto a wrong mode): refused.
         wrong = UncertainSE2(SE2(-1.0, 0.5, 2.8), np.diag([0.02, 0.02, 0.01]) ** 2)
-        kept = mapper.begin_place(here, (1, wrong))
-        assert kept is not None and kept.source == "odometry"
+        [kept] = mapper.begin_place(here, (1, wrong))
+        assert kept.source == "odometry"
         assert kept.T_from_new.mean == alone.T_from_new.mean
+
+
+def test_a_place_learned_where_another_is_tracked_is_joined_to_both(tmp_path: Path) -> None:
+    with MapStore.open(tmp_path / "map.db", "abc123") as store:
+        mapper = Mapper(store, OdometryNoiseSettings())
+        here = _driven(mapper, 2.0)  # place 1 learned at the origin, then 2 m on
+        mapper.begin_place(here)
+        mapper.add_place(synthetic_place(np.random.default_rng(2), "hall"), [])
+        mapper.on_odometry([Odometry(2.0 + 1.5 * k / 50, 0.0, 0.0,
+                                     here.stamp_ns + k * 20_000_000, 200 + k)
+                            for k in range(1, 51)])
+        there = Odometry(3.5, 0.0, 0.0, here.stamp_ns + 50 * 20_000_000, 250)
+        # Back beside place 1 (the tour came round): tracked there, 0.8 m from it.
+        seen = UncertainSE2(SE2(0.8, 0.3, 0.1), np.diag([0.03, 0.03, 0.02]) ** 2)
+        links = mapper.begin_place(there, (1, seen))
+        assert [(link.from_id, link.source) for link in links] == [
+            (2, "odometry"), (1, "vision")]
+        assert links[1].T_from_new is seen
+        stored, added = mapper.add_place(synthetic_place(np.random.default_rng(3), "c"),
+                                         links)
+        assert sorted((t.from_id, t.to_id) for t in added) == [
+            (1, stored.id), (2, stored.id), (stored.id, 1), (stored.id, 2)]
+        assert {n.to_id for n in store.neighbours(stored.id)} == {1, 2}
+        # Tracked 2.5 m from place 1's reference: too far out to trust for a link.
+        far = UncertainSE2(SE2(2.5, 0.0, 0.0), np.diag([0.03, 0.03, 0.02]) ** 2)
+        assert [link.from_id for link in mapper.begin_place(there, (1, far))] == [stored.id]

@@ -90,6 +90,11 @@ class KnownPlace:
     background: float | None
 
 
+# A place recognised by acquisition's certain lead (design §6) is within about this of
+# the robot: in the reference views of offices 1 and 3, places nearer than 0.3 m stood
+# 0.20-0.23 above their backgrounds, those 0.3-0.75 m away 0.113 at most.
+REVISIT_SIGMA_M = 0.3
+
 # Handed over through a path of transitions: particles at least this far around where
 # the path puts the robot (its drift is not all in its covariance).
 GRAPH_MIN_SIGMA_M = 0.3
@@ -132,6 +137,7 @@ class Localiser:
         self.acquisition = PlaceAcquisition(acquisition) if acquisition is not None \
             and acquisition.enabled else None
         self._watched: tuple[int, PreparedTemplates] | None = None
+        self._watched_learned = False  # learned where it began to be watched (its reference)
         self._watch_next: tuple[int, PreparedTemplates] | None = None  # from other threads
         self._known: dict[int, KnownPlace] = {}
         # The backgrounds' levels and the places they were made over (design §9).
@@ -331,7 +337,14 @@ class Localiser:
             closed = self._observe_closure(local)
         timings["recognition"] = (time.perf_counter() - t2) * 1e3
         t3 = time.perf_counter()
-        recent, recent_lrp, decision, background = self._acquire(prepare, odo)
+        recent, recent_lrp, decision, background = self._acquire(prepare, grey, odo)
+        revisited = None if decision is not None or recent_lrp is None else \
+            self._revisit(prepare, grey, recent_lrp)
+        if revisited is not None:
+            recent, recent_lrp = revisited.place_id, revisited.lrp
+            if self.tracker is not None and self.tracker.estimate is not None \
+                    and self.mode == "track":  # else the search finds the place itself
+                switched_from = self._move_to(revisited.place_id, grey, odo)
         timings["acquisition"] = (time.perf_counter() - t3) * 1e3
         timings["total"] = (time.perf_counter() - t0) * 1e3
         return self._belief(frame.stamp_ns, odo is not None, motion, local, scores,
@@ -773,8 +786,8 @@ class Localiser:
                       confidence=confidence, particles=len(tracker.filter.particles),
                       event=event, **common)  # type: ignore[arg-type]
 
-    def _acquire(self, prepare: Callable[[], PreparedPanorama], odo: Odometry | None
-                 ) -> tuple[
+    def _acquire(self, prepare: Callable[[], PreparedPanorama], grey: np.ndarray,
+                 odo: Odometry | None) -> tuple[
             int | None, float | None, AcquisitionDecision | None, tuple[tuple[int, float], ...]]:
         """The watched place's LRP in this frame, whether to learn a new place, and a
         background LRP measured as the robot left a place behind."""
@@ -782,6 +795,7 @@ class Localiser:
             return None, None, None, ()
         if self._watch_next is not None:
             self._watched, self._watch_next = self._watch_next, None
+            self._watched_learned = True
             self.acquisition.reset(self._watched[0])
         if self._watched is None and not self._meters:
             return None, None, None, ()
@@ -803,16 +817,80 @@ class Localiser:
             decision.away_m))
         # ...and back on a known path another place may be recognised here (the most
         # likely place, §7.1): watch that one instead of learning.
-        known = self._most_likely(prepared, exclude=place_id)
+        known = self._most_likely(prepared, grey, exclude=place_id)
         if known is None:
-            known = self._crowded(acq.min_distance_m, exclude=place_id)
+            known = self._crowded(acq.min_distance_m,
+                                  exclude=place_id if self._watched_learned else None)
         if known is not None:
             self._watched = (known, self._known[known].templates)
+            self._watched_learned = False
             self.acquisition.reset(known)
             return place_id, lrp, None, background
         self._watched = None  # until the new place is learned and watched
         self.acquisition.reset(None)
         return place_id, lrp, decision, background
+
+    def _revisit(self, prepare: Callable[[], PreparedPanorama], grey: np.ndarray,
+                 watched_lrp: float) -> PlaceScore | None:
+        """Back at a known place that neither acquisition nor the tracker watches (design
+        §6): the ``revisit_candidates`` places whose signatures are most like the view
+        are recognised in every frame, and one standing ``certain_lead`` above its
+        background, and above the watched place, is where the robot is: acquisition
+        watches it from here (and the caller has the tracker start in it). Without this
+        a tour coming back along a corridor never recognised the places of its first
+        pass there: the tracker followed the new places, and the map's long chain put
+        the old ones metres away (office 3: new places learned 0.29 and 0.41 m from old
+        ones, the robot passing within 0.01 m of one)."""
+        assert self.acquisition is not None and self._watched is not None
+        acq = self.acquisition.settings
+        watched = self._watched[0]
+        tracked = self.tracker.place.id if self.tracker is not None else None
+        top = self._most_like_view(grey, [p for p in self._known if p not in (watched, tracked)])
+        if not top:
+            return None
+        best = max(self._score_many(prepare(), top, estimated=True), key=lambda sc: sc.lead)
+        expected = self._expected_background(watched)
+        watched_lead = watched_lrp - (self.settings.background_lrp if expected is None
+                                      else expected)
+        if best.lead < max(acq.certain_lead, watched_lead):
+            return None
+        self._watched = (best.place_id, self._known[best.place_id].templates)
+        self._watched_learned = False
+        self.acquisition.reset(best.place_id)
+        return best
+
+    def _most_like_view(self, grey: np.ndarray, candidates: list[int]) -> list[int]:
+        """The ``revisit_candidates`` of ``candidates`` whose signatures are most like the
+        view (design §9's cue), most like first; places without a signature left out."""
+        assert self.acquisition is not None
+        k = self.acquisition.settings.revisit_candidates
+        signed = [p for p in candidates if self._known[p].place.signature is not None]
+        if not signed or k == 0:
+            return []
+        here = signature(grey, self.unwarper.panorama.wrap_margin)
+        cue = similarity(here, np.stack([self._known[p].place.signature  # type: ignore[misc]
+                                         for p in signed]))
+        return [signed[i] for i in np.argsort(-cue)[:k]]
+
+    def _move_to(self, place_id: int, grey: np.ndarray, odo: Odometry | None) -> int:
+        """Track in ``place_id`` from here, REVISIT_SIGMA_M around its reference (the
+        orientation from the bearings); the cycle's transition is measured from the
+        estimate being left, if reliable. Returns the place left."""
+        assert self.tracker is not None and self.tracker.estimate is not None
+        current, est = self.tracker.place.id, self.tracker.estimate
+        confidence = self.tracker.confidence
+        tracker = PlaceTracker(self._known[place_id].place, self.settings, self.model,
+                               self.rng)
+        tracker.start_anywhere(grey, REVISIT_SIGMA_M)
+        self._closure = None
+        if odo is not None and reliable(est.covariance, confidence, self.settings):
+            self._closure = CycleClosure(current, place_id,
+                                         UncertainSE2(SE2.of(est.pose), est.covariance),
+                                         OdometryChain(odo, self.odometry_noise),
+                                         self.settings)
+        self.tracker = tracker
+        self.loss.reset()
+        return current
 
     def _expected_background(self, place_id: int) -> float | None:
         """The background LRP the watched place is expected to settle at: measured if it
@@ -824,14 +902,17 @@ class Localiser:
         known = self._known.get(place_id)
         return None if known is None else self._estimated_background(known)
 
-    def _crowded(self, within_m: float, exclude: int) -> int | None:
+    def _crowded(self, within_m: float, exclude: int | None) -> int | None:
         """The place the map puts nearest the tracked estimate, if nearer than
         ``within_m``: no new place is learned there, that one is watched instead —
         ``min_distance_m`` holds for every place, not only the last (corridor 1's way back
         learned places 0.23 m from known ones standing too little above their high,
         aliased backgrounds to be taken over). The watched place ``exclude`` is left out:
         odometry has put the robot far enough from it, where the tracked estimate may lag
-        by centimetres. None: not tracking, or no place so near."""
+        by centimetres — only a place learned there: one taken over was first watched
+        wherever it stood out, maybe a metre before its reference, and the robot may pass
+        it on the way (office 3 learned a place 0.48 m from one it had taken over 1.01 m
+        before it). None: not tracking, or no place so near."""
         around = self._estimate_in_map()
         if around is None:
             return None
@@ -879,15 +960,21 @@ class Localiser:
                 done.append((meter.place_id, value))
         return tuple(done)
 
-    def _most_likely(self, prepared: PreparedPanorama, exclude: int) -> int | None:
+    def _most_likely(self, prepared: PreparedPanorama, grey: np.ndarray, exclude: int
+                     ) -> int | None:
         """The known place to watch instead of learning a new one here, if any
         (``taken_over``): each place's lead is its LRP minus its own background,
-        estimated until measured (§9.2, design §6)."""
+        estimated until measured (§9.2, design §6). Recognised: the places the map puts
+        near the estimate, and of the others those most like the view (as for a
+        revisit), which count only by ``certain_lead``."""
         assert self.acquisition is not None
         near = self._near_estimate(self.acquisition.settings.known_within_m)
         ids = [p for p in self._known if p != exclude and (near is None or p in near)]
+        ids += self._most_like_view(grey, [p for p in self._known
+                                           if p != exclude and p not in ids])
         scores = self._score_many(prepared, ids, estimated=True)
-        return taken_over({sc.place_id: sc.lead for sc in scores}, self.acquisition.settings)
+        return taken_over({sc.place_id: sc.lead for sc in scores}, self.acquisition.settings,
+                          near)
 
 
 def _merged(*groups: tuple[PlaceScore, ...] | list[PlaceScore]) -> tuple[PlaceScore, ...]:

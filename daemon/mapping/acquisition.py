@@ -129,16 +129,21 @@ class PlaceAcquisition:
                                    self.origin, self._away())
 
 
-def taken_over(leads: dict[int, float], settings: AcquisitionSettings) -> int | None:
+def taken_over(leads: dict[int, float], settings: AcquisitionSettings,
+               near: set[int] | None = None) -> int | None:
     """When a decision comes back on a known path (§7.1: the most likely place): the
     known place whose lead (LRP minus its background, by place id) is highest, if it is
     by the recognition margin — and by the coverage margin, for a place taken over below
     it would be left again as soon as the robot is ``min_distance_m`` on (corridor 1: a
     place 2.8 m behind, taken over at a lead of 0.055 in the aliased corridor, left a
-    2.6 m gap between places). None: learn a new place here."""
+    2.6 m gap between places). ``near``: the places the map puts near the robot; one
+    outside it counts only by ``certain_lead`` (a look-alike elsewhere is no path back,
+    but no look-alike stands that high). None: learn a new place here."""
     need = max(settings.recognition_margin, settings.coverage_margin)
-    best = max(leads, key=lambda p: leads[p], default=None)
-    return best if best is not None and leads[best] >= need else None
+    counted = {p: lead for p, lead in leads.items()
+               if near is None or p in near or lead >= settings.certain_lead}
+    best = max(counted, key=lambda p: counted[p], default=None)
+    return best if best is not None and counted[best] >= need else None
 
 
 class BackgroundMeter:

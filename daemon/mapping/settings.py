@@ -124,3 +124,14 @@ class AcquisitionSettings:
                                     "of the estimate (2 sigma of the path's drift allowed; "
                                     "one no path reaches is not ruled out): a look-alike "
                                     "elsewhere in the map is not a path back")
+    certain_lead: float = setting(0.15, ge=0.0, le=1.0, doc="...or wherever the map puts "
+                                  "it, if it stands this far above its background: the "
+                                  "robot is at it, whatever the map's drift says (offices 1 "
+                                  "and 3: 0.083 at most in 45,618 reference views 2 m or "
+                                  "more from the place)")
+    revisit_candidates: int = setting(3, ge=0, le=100, doc="while a place is watched, the "
+                                      "places whose signatures are most like the view are "
+                                      "recognised every frame, this many; one standing "
+                                      "certain_lead above its background and above the "
+                                      "watched place is where the robot is: watched "
+                                      "instead, and tracked in (0: not looked for)")

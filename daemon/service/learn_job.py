@@ -173,7 +173,7 @@ class LearnJob:
         self._on_done = on_done
         self.abort_requested = threading.Event()
         self.progress = Progress("starting", 0.0)
-        self._link: Link | None = None
+        self._links: list[Link] = []
         self._last_sent = (-1.0, "")
         self._thread = threading.Thread(target=self._run, name="placecell-learn", daemon=True)
 
@@ -200,7 +200,7 @@ class LearnJob:
             self._reply("progress", {"phase": step.phase, "fraction": round(step.fraction, 3)})
 
     def _begin(self, start: Odometry) -> None:
-        self._link = self.mapper.begin_place(start, self._seen())
+        self._links = self.mapper.begin_place(start, self._seen())
 
     def _run(self) -> None:
         outcome = LearnOutcome(None, ErrorCode.FAILED, "learning did not finish")
@@ -215,7 +215,7 @@ class LearnJob:
             place = Place(tbl.result(), tbl.reference_panorama, label=self.label,
                           created_unix_s=time.time(),
                           local_space=self._profile(tbl.reference_panorama))
-            stored, transitions = self.mapper.add_place(place, self._link)
+            stored, transitions = self.mapper.add_place(place, self._links)
             outcome = LearnOutcome(stored, None, "", reference_stamp_ns=tbl.start.stamp_ns)
             self._reply("progress", {"phase": "lookalikes", "fraction": 1.0})
             try:

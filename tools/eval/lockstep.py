@@ -150,18 +150,18 @@ class Run:
         """Turn Back and Look here with the daemon's loop; the place is stored with its
         transition from the place learned before and handed to the localiser, which
         tracks from its reference, as in the daemon."""
-        link: list[Link | None] = []
+        links: list[Link] = []
         truth: list[tuple[float, float, float]] = []
 
         def start(odo: Any) -> None:  # at rest at the reference pose
-            link.append(self.mapper.begin_place(odo, self.localiser.reliable_estimate()))
+            links.extend(self.mapper.begin_place(odo, self.localiser.reliable_estimate()))
             truth.append(self.robot.true_pose())
 
         tbl = drive_tbl(self.sensors, self.base, self.localiser.unwarper, self.cfg.tbl,
                         on_start=start)
         stored, added = self.mapper.add_place(
             Place(tbl.result(), tbl.reference_panorama, label=label,
-                  local_space=self.localiser.place_profile(tbl.reference_panorama)), link[0])
+                  local_space=self.localiser.place_profile(tbl.reference_panorama)), links)
         place = dataclasses.replace(stored, reference_panorama=None)
         self.localiser.place_learned(place, added)  # as the daemon does
         for changed in self.mapper.measure_cross_backgrounds(place.id):

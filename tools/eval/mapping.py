@@ -210,11 +210,11 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
             if decision is not None:
                 mapper.set_background(decision.place_id, decision.background_lrp)
                 localiser.know_place(mapper.graph.place(decision.place_id))
-            link: list[Link | None] = []
+            links: list[Link] = []
             start_ns = frame.stamp_ns
             try:
                 tbl = drive_tbl(sensors, base, localiser.unwarper, cfg.tbl,
-                                on_start=functools.partial(_begin, mapper, link, localiser))
+                                on_start=functools.partial(_begin, mapper, links, localiser))
             except LearningError:
                 mapper.cancel_place()
                 failures += 1
@@ -225,7 +225,7 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
             ref = _reference_pose(robot)
             stored, added = mapper.add_place(Place(
                 tbl.result(), tbl.reference_panorama, created_unix_s=time.time(),
-                local_space=localiser.place_profile(tbl.reference_panorama)), link[0])
+                local_space=localiser.place_profile(tbl.reference_panorama)), links)
             refs.append(ref)
             localiser.place_learned(stored, added)  # as the daemon does after a learn job
             for changed in mapper.measure_cross_backgrounds(stored.id):
@@ -264,9 +264,8 @@ def _traced_first(pose: tuple[float, float, float], path_m: float, belief: Any,
                 round(v, 3) for v in belief.pose_in_place]}
 
 
-def _begin(mapper: Mapper, link: list[Link | None], localiser: Localiser, start: Any
-           ) -> None:
-    link.append(mapper.begin_place(start, localiser.reliable_estimate()))
+def _begin(mapper: Mapper, links: list[Link], localiser: Localiser, start: Any) -> None:
+    links.extend(mapper.begin_place(start, localiser.reliable_estimate()))
 
 
 def _reference_pose(robot: SimRobot) -> tuple[float, float, float]:

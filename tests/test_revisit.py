@@ -1,0 +1,69 @@
+"""Back at a known place the map does not link to (design §6): while mapping, a place
+standing ``certain_lead`` above its background is where the robot is — acquisition
+watches it and the tracker moves into it, so no new place is learned on top of it.
+
+The office corridor's places "a" (x = 3 m) and "c" (x = 6 m) are known without any
+transition between them (a tour's first pass and its way back, the chain between them
+too long to trust); the robot starts at c, tracked there, and drives back past a. The
+truth (the places' reference poses) stays on the test's side."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from daemon.localisation.localiser import Localiser
+from daemon.mapping.settings import AcquisitionSettings
+from tests.conftest import OfficeMap
+from tools.eval.lockstep import Run, lockstep_config
+
+Frames = list[tuple[float, int | None, int | None, int | None]]
+
+
+def _drive_back_past_a(tmp_path: Path, office_map: OfficeMap, candidates: int
+                       ) -> tuple[Frames, dict[str, int]]:
+    """Per frame: the true distance to a's reference, the watched place, the tracked
+    place, the place the tracker switched from; and the places' ids by label."""
+    refs = office_map(tmp_path / "map.db")
+    a_ref, c_ref = refs["a"], refs["c"]
+    cfg = lockstep_config(1, start_pose=(c_ref.x, c_ref.y, c_ref.yaw))
+    # No decision to learn on the 3 m back (min_distance_m): only the revisit is looked at.
+    acquisition = AcquisitionSettings(enabled=True, min_distance_m=10.0,
+                                      revisit_candidates=candidates)
+    with Run(cfg, map_path=tmp_path / "map.db") as run:
+        ids = {p.label: p.id for p in run.mapper.graph.places}
+        localiser = Localiser(cfg.mirror, cfg.panorama, acquisition=acquisition,
+                              settings=cfg.localisation, odometry_noise=cfg.odometry)
+        localiser.know_place(run.mapper.graph.place(ids["a"]))
+        localiser.watch_place(run.mapper.graph.place(ids["c"]))
+        localiser.set_pose(ids["c"], (0.0, 0.0, 0.0), 0.03, 0.03)
+        run.localiser = localiser
+        out: Frames = []
+        for belief in run.drive(a_ref.x - c_ref.x - 0.4, 0.0, 0.0, 0.3):
+            x, y, _ = run.robot.true_pose()
+            out.append((math.hypot(x - a_ref.x, y - a_ref.y), belief.recent_place,
+                        belief.place_id, belief.switched_from))
+        return out, ids
+
+
+@pytest.mark.timeout(300)
+def test_a_known_place_passed_again_is_watched_and_tracked_in(
+        tmp_path: Path, office_map: OfficeMap) -> None:
+    frames, ids = _drive_back_past_a(tmp_path, office_map, candidates=3)
+    a, c = ids["a"], ids["c"]
+    first = next(i for i, f in enumerate(frames) if f[1] == a)
+    distance, _, tracked, switched_from = frames[first]
+    assert distance <= 0.5, f"a taken for the robot's place {distance:.2f} m from it"
+    assert tracked == a and switched_from == c
+    assert all(f[1] == a and f[2] == a for f in frames[first:])  # kept to the end
+    assert all(f[1] == c for f in frames[:first])  # c watched until then
+
+
+@pytest.mark.timeout(300)
+def test_without_the_revisit_check_the_place_passed_again_is_not_seen(
+        tmp_path: Path, office_map: OfficeMap) -> None:
+    frames, ids = _drive_back_past_a(tmp_path, office_map, candidates=0)
+    assert min(f[0] for f in frames) < 0.2  # the robot did pass a
+    assert all(f[1] == ids["c"] for f in frames)
