@@ -793,10 +793,9 @@ class Localiser:
         background LRP measured as the robot left a place behind."""
         if self.acquisition is None or self.panorama is None:
             return None, None, None, ()
-        if self._watch_next is not None:
-            self._watched, self._watch_next = self._watch_next, None
-            self._watched_learned = True
-            self.acquisition.reset(self._watched[0])
+        learned, self._watch_next = self._watch_next, None  # set from other threads
+        if learned is not None:
+            self._watch(learned[0], learned=True)
         if self._watched is None and not self._meters:
             return None, None, None, ()
         prepared = prepare()
@@ -822,9 +821,7 @@ class Localiser:
             known = self._crowded(acq.min_distance_m,
                                   exclude=place_id if self._watched_learned else None)
         if known is not None:
-            self._watched = (known, self._known[known].templates)
-            self._watched_learned = False
-            self.acquisition.reset(known)
+            self._watch(known, learned=False)
             return place_id, lrp, None, background
         self._watched = None  # until the new place is learned and watched
         self.acquisition.reset(None)
@@ -849,15 +846,19 @@ class Localiser:
         if not top:
             return None
         best = max(self._score_many(prepare(), top, estimated=True), key=lambda sc: sc.lead)
-        expected = self._expected_background(watched)
-        watched_lead = watched_lrp - (self.settings.background_lrp if expected is None
-                                      else expected)
+        watched_lead = watched_lrp - self._background(self._known[watched], estimated=True)
         if best.lead < max(acq.certain_lead, watched_lead):
             return None
-        self._watched = (best.place_id, self._known[best.place_id].templates)
-        self._watched_learned = False
-        self.acquisition.reset(best.place_id)
+        self._watch(best.place_id, learned=False)
         return best
+
+    def _watch(self, place_id: int, learned: bool) -> None:
+        """Acquisition watches ``place_id`` from here: ``learned`` there (its reference
+        is where the watch begins), or a known place taken over."""
+        assert self.acquisition is not None
+        self._watched = (place_id, self._known[place_id].templates)
+        self._watched_learned = learned
+        self.acquisition.reset(place_id)
 
     def _most_like_view(self, grey: np.ndarray, candidates: list[int]) -> list[int]:
         """The ``revisit_candidates`` of ``candidates`` whose signatures are most like the
