@@ -92,6 +92,9 @@ class MapSettings:
     resume: bool = setting(True, doc="start from the pose saved at the last stop")
     save_pose_period_s: float = setting(2.0, gt=0.0, le=3600.0,
                                         doc="save the tracked pose this often (and on stop)")
+    if_unwritable: Literal["refuse", "localisation"] = setting(
+        "refuse", doc="a map file that cannot be written, in mapping mode: refuse to start "
+        "(exit 2), or start in localisation mode on it read-only and say so in status")
 
 
 @dataclass(frozen=True)

@@ -45,6 +45,10 @@ class MapStoreError(PlacecellError):
     """The map file is unreadable, corrupt, or made with another panorama geometry."""
 
 
+class MapNotWritableError(MapStoreError):
+    """The map file is healthy but cannot be written (read-only file or directory)."""
+
+
 class LearningError(PlacecellError):
     """Place learning (Turn Back and Look) was refused or failed."""
 
@@ -55,7 +59,3 @@ class LearningRefusedError(LearningError):
 
 class LearningAbortedError(LearningError):
     """Place learning was aborted on request; nothing was stored."""
-
-
-class ProtocolError(PlacecellError):
-    """A wire frame or request is malformed."""

@@ -82,14 +82,17 @@ def venv_bin(name: str) -> str:
 
 @contextlib.contextmanager
 def running_daemon(config: Path, env: dict[str, str] | None = None,
-                   extra_args: list[str] | None = None) -> Iterator[subprocess.Popen[str]]:
-    """The daemon in a subprocess, its log in ``daemon.log`` beside ``config`` (a file, not
+                   extra_args: list[str] | None = None,
+                   wrapper: list[str] | None = None) -> Iterator[subprocess.Popen[str]]:
+    """The daemon in a subprocess (run through ``wrapper``, a command prefix, if given),
+    its log in ``daemon.log`` beside ``config`` (a file, not
     a pipe nobody reads: a full pipe would block the daemon's logging); the log's tail is
     printed when the test fails inside."""
     log_path = config.with_name("daemon.log")
     with log_path.open("a") as log_file:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "daemon", "--config", str(config), *(extra_args or [])],
+            [*(wrapper or []), sys.executable, "-m", "daemon", "--config", str(config),
+             *(extra_args or [])],
             cwd=REPO, env={**os.environ, **(env or {})}, stdout=log_file,
             stderr=subprocess.STDOUT, text=True)
     try:

@@ -410,6 +410,10 @@ def cmd_status(args: argparse.Namespace) -> int:
     return 0
 
 
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
 def format_status(st: dict[str, Any]) -> str:
     lines = [
         f"robot {st['robot']}: {'healthy' if st['healthy'] else 'DEGRADED'}, "
@@ -420,7 +424,13 @@ def format_status(st: dict[str, Any]) -> str:
     belief = st.get("belief") or {}
     if belief:
         lines.append(f"  belief: {belief['state']} ({belief['reason']})")
-    lines.append(f"  map: {st['map']['places']} places in {st['map']['path']}")
+    m = st["map"]
+    readonly = "" if m.get("writable", True) else f"; READ-ONLY: {m.get('readonly_reason')}"
+    lines.append(f"  map: {_count(m['places'], 'place')} in {m['path']}, {m['mode']} mode"
+                 f"{readonly}")
+    job = st.get("job")
+    lines.append("  job: none" if job is None else
+                 f"  job: {job['kind']} ({job['phase']}, {job['fraction']:.0%})")
     for name, comp in st["components"].items():
         err = f", last error {comp['last_error_age_s']} s ago: {comp['last_error']}" \
             if comp.get("last_error") else ""

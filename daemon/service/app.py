@@ -38,17 +38,17 @@ from daemon.service.learn_job import (
     job_settings,
 )
 from daemon.service.live_view import TOPICS, LiveScene, Sink
+from daemon.service.map_file import open_map
 from daemon.service.mapper import Mapper, Seen
 from daemon.service.notify import Notifier
 from daemon.service.pipeline import make_localiser
 from daemon.service.ros2 import Ros2PosePublisher
 from daemon.service.supervisor import Supervisor, describe
-from daemon.store.sqlite_store import MapStore, SavedPose
+from daemon.store.sqlite_store import SavedPose
 from daemon.vision.drawing import draw_landmarks
 from daemon.vision.unwarp import Unwarper
 from hal.registry import HalContext, create_base, create_camera
 from kernel.errors import PlacecellError
-from kernel.panorama import geometry_checksum
 from kernel.se2 import SE2
 
 log = logging.getLogger(__name__)
@@ -77,9 +77,11 @@ class Daemon:
         self._belief: Belief | None = None
         self._belief_received_ns = 0
         self.hal = HalContext(config)
-        # The map first: a map made with another geometry stops the daemon before any device.
-        self.map = MapStore.open(config.map.path, geometry_checksum(config.mirror,
-                                                                    config.panorama))
+        # The map first: a map made with another geometry, or one mapping mode cannot
+        # write, stops the daemon before any device (design §11).
+        opened = open_map(config)
+        self.map = opened.store
+        self.map_readonly_reason = opened.readonly_reason
         try:
             self.mapper = Mapper(self.map, config.odometry)
         except BaseException:
@@ -90,7 +92,8 @@ class Daemon:
         self._job: LearnJob | None = None
         self._queryables: list[Any] = []
         self._acquire_after = 0.0  # monotonic s: no autonomous learning before
-        self.mode = config.mapping.mode  # cmd/mode changes it until the daemon stops
+        # cmd/mode changes it until the daemon stops; a read-only map only localises.
+        self.mode = config.mapping.mode if self.map_readonly_reason is None else "localisation"
         self._tracked: SavedPose | None = None  # the last pose tracked, to save
         self._saved: SavedPose | None = None  # the one saved last
         self.supervisor = Supervisor(
@@ -157,7 +160,7 @@ class Daemon:
 
     def _save_pose(self) -> None:
         tracked = self._tracked
-        if tracked is None or tracked is self._saved:
+        if tracked is None or tracked is self._saved or self.map.readonly:
             return
         try:
             self.map.save_pose(tracked)
@@ -389,6 +392,9 @@ class Daemon:
         """cmd/mode: switch between mapping and localisation (design §11); refused while
         a place is being learned (abort it first)."""
         request = api.parse(api.ModeRequest, _payload(query), "mode")
+        if request.mode == "mapping" and self.map_readonly_reason is not None:
+            raise api.RequestError(api.ErrorCode.REFUSED, "mapping needs a writable map: "
+                                   f"{self.map_readonly_reason}")
         if request.mode and request.mode != self.mode:
             with self._job_lock:
                 if self._job is not None:
@@ -567,7 +573,8 @@ class Daemon:
             "belief": self._belief_summary(belief, now),
             "map": {"path": self.config.map.path, "places": self.mapper.place_count(),
                     "transitions": self.mapper.transition_count(),
-                    "mode": self.mode},
+                    "mode": self.mode, "writable": not self.map.readonly,
+                    "readonly_reason": self.map_readonly_reason},
             "job": None if self._job is None else {
                 "kind": self._job.kind, "phase": self._job.progress.phase,
                 "fraction": round(self._job.progress.fraction, 3)},

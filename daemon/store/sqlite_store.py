@@ -16,7 +16,9 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import logging
+import os
 import sqlite3
+import stat
 import threading
 import time
 from collections.abc import Iterator, Sequence
@@ -32,7 +34,7 @@ from daemon.mapping.transition import Transition
 from daemon.store import codec
 from daemon.vision.disambiguation import Feature, PairFeatures
 from daemon.vision.floor import BINS, ColourModel, FloorModel
-from kernel.errors import MapStoreError
+from kernel.errors import MapNotWritableError, MapStoreError
 from kernel.se2 import SE2, UncertainSE2
 
 log = logging.getLogger(__name__)
@@ -145,21 +147,31 @@ class MapStore:
         Raises MapStoreError, leaving the file untouched, for anything that is not a
         healthy placecell map of this geometry and of a schema this version reads."""
         p = Path(path)
-        exists = p.exists() and p.stat().st_size > 0
-        if not exists:
+        _refuse_unusable(p)
+        if not p.exists():
             if readonly:
                 raise MapStoreError(f"{p}: no such map file")
             return cls._create(p, geometry_checksum)
+        journals = [j for j in _with_journals(p)[1:] if not j.exists()]
         version = _inspect(p, geometry_checksum)
         if readonly:
             db = _connect(p, readonly=True)
             return cls(db, p, readonly=True)
         db = _connect(p, readonly=False)
         try:
+            try:
+                _probe_write(db, p)
+            except MapNotWritableError:
+                db.close()
+                _remove_empty(journals)  # what SQLite's reading left beside it
+                raise
             db.execute("PRAGMA journal_mode=WAL")
             db.execute("PRAGMA foreign_keys=ON")
             if version < SCHEMA_VERSION:
                 _migrate(db, p, version)
+        except MapStoreError:
+            db.close()
+            raise
         except sqlite3.DatabaseError as e:
             db.close()
             raise MapStoreError(f"{p}: cannot open the map for writing ({e})") from e
@@ -167,28 +179,39 @@ class MapStore:
 
     @classmethod
     def _create(cls, p: Path, geometry_checksum: str | None) -> MapStore:
+        """A new, empty map, built under a temporary name and renamed into place: a file
+        at ``p`` is always a whole map, never one cut short while it was made."""
         if geometry_checksum is None:
             raise MapStoreError(f"{p}: a new map needs the panorama geometry's checksum")
         try:
             p.parent.mkdir(parents=True, exist_ok=True)
         except OSError as e:
-            raise MapStoreError(f"cannot create the map directory {p.parent}: {e}") from e
+            raise MapStoreError(f"cannot create the map directory {p.parent}: "
+                                f"{e.strerror}") from e
+        building = p.with_name(p.name + ".new")
+        for leftover in _with_journals(building):
+            leftover.unlink(missing_ok=True)
         try:
-            db = _connect(p, readonly=False)
-            db.execute("PRAGMA journal_mode=WAL")
-            db.execute("PRAGMA foreign_keys=ON")
-            with _transaction(db):
-                _create_tables(db)
-                db.executemany("INSERT INTO meta(key, value) VALUES (?, ?)", [
-                    ("application", APPLICATION),
-                    ("schema_version", str(SCHEMA_VERSION)),
-                    ("geometry_checksum", geometry_checksum),
-                    ("created_unix_s", repr(time.time())),
-                ])
-        except sqlite3.DatabaseError as e:
+            db = _connect(building, readonly=False)
+            try:
+                db.execute("PRAGMA journal_mode=WAL")
+                with _transaction(db):
+                    _create_tables(db)
+                    db.executemany("INSERT INTO meta(key, value) VALUES (?, ?)", [
+                        ("application", APPLICATION),
+                        ("schema_version", str(SCHEMA_VERSION)),
+                        ("geometry_checksum", geometry_checksum),
+                        ("created_unix_s", repr(time.time())),
+                    ])
+            finally:
+                db.close()  # the last connection: the log is checkpointed into the file
+            os.replace(building, p)
+        except (sqlite3.DatabaseError, OSError) as e:
+            with contextlib.suppress(OSError):
+                building.unlink(missing_ok=True)
             raise MapStoreError(f"cannot create the map {p}: {e}") from e
         log.info("created map %s", p)
-        return cls(db, p, readonly=False)
+        return cls.open(p, geometry_checksum)
 
     # ------------------------------------------------------------ reading
     def place_count(self) -> int:
@@ -473,6 +496,60 @@ def _connect(p: Path, readonly: bool) -> sqlite3.Connection:
     return sqlite3.connect(p, check_same_thread=False, isolation_level=None)
 
 
+def _refuse_unusable(p: Path) -> None:
+    """A path that is no map file and will not become one, refused before anything is
+    read or written: a directory, a device or pipe, an empty file (no map this program
+    writes is ever empty: :meth:`MapStore._create` renames a whole one into place), a
+    file or folder it may not read."""
+    try:
+        st = p.stat()
+    except (FileNotFoundError, NotADirectoryError):
+        return  # no file yet: a new map, where the mode may create one
+    except OSError as e:
+        raise MapStoreError(f"{p}: cannot reach the map file ({e.strerror})") from e
+    if stat.S_ISDIR(st.st_mode):
+        raise MapStoreError(f"{p} is a directory, not a map file: set [map] path to a file "
+                            f"(for example {p / 'placecell.db'})")
+    if not stat.S_ISREG(st.st_mode):
+        raise MapStoreError(f"{p} is not a regular file (a device, pipe or socket): set "
+                            "[map] path to a map file")
+    if st.st_size == 0:
+        raise MapStoreError(f"{p} is empty (0 bytes): not a placecell map, and not made a "
+                            "new one unasked; delete it, or set [map] path to another file, "
+                            "to start a new map; the file was left untouched")
+    if not os.access(p, os.R_OK):
+        raise MapStoreError(f"{p}: cannot read the map file (permission denied)")
+
+
+def _probe_write(db: sqlite3.Connection, p: Path) -> None:
+    """Refuse a map that cannot be written before anything is learned: SQLite opens a
+    read-only file read-only without a word and fails only at the first write, so one
+    write is tried and rolled back (the file's bytes stay as they were)."""
+    try:
+        db.execute("BEGIN IMMEDIATE")
+        try:
+            db.execute("UPDATE meta SET value = value WHERE key = 'application'")
+        finally:
+            db.execute("ROLLBACK")
+    except sqlite3.OperationalError as e:
+        raise MapNotWritableError(f"{p} cannot be written ({e}): check the file's and its "
+                                  "directory's permissions and the file system") from e
+
+
+def _remove_empty(journals: list[Path]) -> None:
+    """Remove the journal files this open made that hold nothing (a read-only
+    connection leaves an empty log and its index behind; no other reader had them)."""
+    for j in journals:
+        with contextlib.suppress(OSError):
+            if j.name.endswith("-shm") or j.stat().st_size == 0:
+                j.unlink()
+
+
+def _with_journals(p: Path) -> list[Path]:
+    return [p, p.with_name(p.name + "-wal"), p.with_name(p.name + "-shm"),
+            p.with_name(p.name + "-journal")]
+
+
 def _inspect(p: Path, geometry_checksum: str | None) -> int:
     """Every check, on a read-only connection: the schema version this file has."""
     with open(p, "rb") as f:
@@ -517,6 +594,14 @@ def _inspect(p: Path, geometry_checksum: str | None) -> int:
             raise MapStoreError(f"{p}: a version 1 map with places cannot be migrated (no "
                                 "release stored any); the file was left untouched")
         return version
+    except sqlite3.OperationalError as e:
+        if "readonly" in str(e):  # a map in write-ahead-log mode in a read-only folder
+            raise MapNotWritableError(
+                f"{p} cannot be written ({e}): its folder {p.parent} is read-only, and "
+                "SQLite keeps the map's write-ahead log beside it, even to read it; the "
+                "file was left untouched") from e
+        raise MapStoreError(f"{p} is not a readable placecell map ({e}); the file was left "
+                            "untouched") from e
     except sqlite3.DatabaseError as e:
         raise MapStoreError(f"{p} is not a readable placecell map ({e}); the file was left "
                             "untouched") from e
