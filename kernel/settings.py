@@ -9,6 +9,7 @@ out-of-range values with a :class:`ConfigError` naming ``section.key``.
 from __future__ import annotations
 
 import dataclasses
+import math
 import tomllib
 import types
 import typing
@@ -19,6 +20,9 @@ from typing import Any, Literal, TypeVar, get_args, get_origin
 from kernel.errors import ConfigError
 
 T = TypeVar("T")
+
+# Integers a setting or request may hold: what SQLite and numpy's int64 keep.
+MAX_INT = 2**63 - 1
 
 _MISSING = dataclasses.MISSING
 
@@ -97,6 +101,14 @@ def as_dict(obj: Any) -> Any:
     return obj
 
 
+def _shown(value: Any) -> str:
+    """A value as an error message shows it: a huge one cut short."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10**60:
+        return f"an integer of {len(str(abs(value)))} digits"
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
 def _type_name(tp: Any) -> str:
     return getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
 
@@ -109,7 +121,7 @@ def _convert(tp: Any, value: Any, where: str) -> Any:
         choices = get_args(tp)
         if value not in choices:
             raise ConfigError(
-                f"{where}: {value!r} is not one of {', '.join(repr(c) for c in choices)}"
+                f"{where}: {_shown(value)} is not one of {', '.join(repr(c) for c in choices)}"
             )
         return value
     if origin in (typing.Union, types.UnionType):
@@ -124,10 +136,12 @@ def _convert(tp: Any, value: Any, where: str) -> Any:
                 return _convert(arg, value, where)
             except ConfigError as e:
                 errors.append(str(e))
-        raise ConfigError(errors[0] if len(errors) == 1 else f"{where}: {value!r} fits no type")
+        raise ConfigError(errors[0] if len(errors) == 1
+                          else f"{where}: {_shown(value)} fits no type")
     if origin in (list, tuple):
         if not isinstance(value, list | tuple):
-            raise ConfigError(f"{where}: expected a list, got {type(value).__name__} {value!r}")
+            raise ConfigError(f"{where}: expected a list, got {type(value).__name__} "
+                              f"{_shown(value)}")
         args = get_args(tp)
         if origin is tuple and args and args[-1] is not Ellipsis:
             if len(value) != len(args):
@@ -144,19 +158,32 @@ def _convert(tp: Any, value: Any, where: str) -> Any:
         return value
     if tp is bool:
         if not isinstance(value, bool):
-            raise ConfigError(f"{where}: expected true or false, got {value!r}")
+            raise ConfigError(f"{where}: expected true or false, got {_shown(value)}")
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{where}: expected an integer, got {type(value).__name__} {value!r}")
+            raise ConfigError(f"{where}: expected an integer, got {type(value).__name__} "
+                              f"{_shown(value)}")
+        if not -MAX_INT <= value <= MAX_INT:
+            raise ConfigError(f"{where}: {_shown(value)} is out of range (an integer within "
+                              f"±{MAX_INT})")
         return value
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ConfigError(f"{where}: expected a number, got {type(value).__name__} {value!r}")
-        return float(value)
+            raise ConfigError(f"{where}: expected a number, got {type(value).__name__} "
+                              f"{_shown(value)}")
+        try:
+            number = float(value)
+        except OverflowError:
+            raise ConfigError(f"{where}: {_shown(value)} is out of range (too large for a "
+                              "number)") from None
+        if not math.isfinite(number):
+            raise ConfigError(f"{where}: {number!r} is not a finite number")
+        return number
     if tp is str:
         if not isinstance(value, str):
-            raise ConfigError(f"{where}: expected a string, got {type(value).__name__} {value!r}")
+            raise ConfigError(f"{where}: expected a string, got {type(value).__name__} "
+                              f"{_shown(value)}")
         return value
     raise ConfigError(f"{where}: unsupported setting type {_type_name(tp)}")
 

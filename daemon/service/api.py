@@ -10,15 +10,17 @@ object with a ``schema`` field and a ``kind``: ``progress`` (long jobs stream th
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any, Literal, TypeVar
 
 from daemon.service import zenoh_link
 from kernel.errors import ConfigError, PlacecellError
-from kernel.settings import build, setting
+from kernel.settings import MAX_INT, build, setting
 
 REPLY_SCHEMA = "placecell.reply"
+_DECIMAL = re.compile(r"[0-9]{1,19}")
 MAX_REQUEST_BYTES = 64 * 1024
 
 
@@ -97,10 +99,12 @@ def parse(cls: type[R], payload: bytes | None, what: str) -> R:
         table: Any = {}
     else:
         try:
-            table = json.loads(raw.decode("utf-8"))
+            table = json.loads(raw.decode("utf-8"), parse_constant=_not_a_number)
         except (UnicodeDecodeError, json.JSONDecodeError) as e:
             raise RequestError(ErrorCode.BAD_REQUEST, f"{what}: not a JSON object ({e})"
                                ) from e
+        except ValueError as e:  # NaN, Infinity; an integer over Python's 4300 digits
+            raise RequestError(ErrorCode.BAD_REQUEST, f"{what}: {e}") from e
         except RecursionError as e:  # "[[[[..." nested deeper than the parser goes
             raise RequestError(ErrorCode.BAD_REQUEST, f"{what}: JSON nested too deeply"
                                ) from e
@@ -111,6 +115,21 @@ def parse(cls: type[R], payload: bytes | None, what: str) -> R:
         return build(cls, table, what)
     except ConfigError as e:
         raise RequestError(ErrorCode.BAD_REQUEST, str(e)) from e
+
+
+def _not_a_number(name: str) -> Any:
+    raise ValueError(f"{name} is not a number JSON allows: every number must be finite")
+
+
+def place_id(text: str, what: str) -> int:
+    """A place id written in a key (``map/place/<id>``): ASCII decimal digits for a
+    positive integer the map can hold; RequestError(bad_request) naming it otherwise
+    (``str.isdigit`` would take '²' and '١')."""
+    if not _DECIMAL.fullmatch(text) or not 1 <= int(text) <= MAX_INT:
+        shown = text if len(text) <= 40 else text[:37] + "..."
+        raise RequestError(ErrorCode.BAD_REQUEST, f"{what}: {shown!r} is not a place id "
+                           f"(a decimal number from 1 to {MAX_INT})")
+    return int(text)
 
 
 def progress(**fields: Any) -> bytes:

@@ -188,17 +188,23 @@ class Daemon:
             self._ros2 = Ros2PosePublisher(s, self.config.ros2)
             log.info("ROS 2: publishing %s on %s", self.config.ros2.topic, self._ros2.key)
         # Late joiners (placecellctl status) get the latest status at once by query.
-        for leaf, handler in (("status", self._answer_status),
-                              ("cmd/learn_place", self._answer_learn),
-                              ("cmd/abort", self._answer_abort),
-                              ("cmd/set_pose", self._answer_set_pose),
-                              ("cmd/relocalise", self._answer_relocalise),
-                              ("cmd/mode", self._answer_mode),
-                              ("map/places", self._answer_places),
-                              ("map/transitions", self._answer_transitions),
-                              ("map/place/**", self._answer_place)):
+        answers = (("status", self._answer_status),
+                   ("cmd/learn_place", self._answer_learn),
+                   ("cmd/abort", self._answer_abort),
+                   ("cmd/set_pose", self._answer_set_pose),
+                   ("cmd/relocalise", self._answer_relocalise),
+                   ("cmd/mode", self._answer_mode),
+                   ("map/places", self._answer_places),
+                   ("map/transitions", self._answer_transitions),
+                   ("map/place/**", self._answer_place))
+        for leaf, handler in answers:
             self._queryables.append(s.declare_queryable(
                 zenoh_link.key(self.robot, leaf), _guarded(leaf, handler)))
+        # Every other key under the robot's prefix is answered too, with what it asked
+        # wrong, not left to the client's timeout (design §11).
+        self._queryables.append(s.declare_queryable(
+            zenoh_link.key(self.robot, "**"),
+            _unknown_key(self.robot, [leaf for leaf, _ in answers])))
         log.info("zenoh session %s: listening on %s, connecting to %s, multicast scouting %s",
                  s.zid(), z.listen, z.connect, "on" if z.multicast_scouting else "off")
 
@@ -411,11 +417,10 @@ class Daemon:
         api.parse(api.NoParameters, _payload(query), "map/place")
         prefix = zenoh_link.key(self.robot, "map/place/")
         rest = str(query.key_expr).removeprefix(prefix).split("/")
-        if len(rest) not in (1, 2) or (len(rest) == 2 and rest[1] != "panorama") \
-                or not rest[0].isdigit():
-            raise api.RequestError(api.ErrorCode.BAD_REQUEST, f"{query.key_expr}: ask for "
-                                   f"{prefix}<id> or {prefix}<id>/panorama")
-        place_id = int(rest[0])
+        if len(rest) not in (1, 2) or (len(rest) == 2 and rest[1] != "panorama"):
+            raise api.RequestError(api.ErrorCode.BAD_REQUEST, f"{_shorter(query.key_expr)}: "
+                                   f"ask for {prefix}<id> or {prefix}<id>/panorama")
+        place_id = api.place_id(rest[0], "map/place")
         if not self.mapper.has_place(place_id):
             raise api.RequestError(api.ErrorCode.NOT_FOUND, f"place {place_id} is not in "
                                    f"the map ({self.mapper.place_count()} places)")
@@ -697,6 +702,35 @@ def _guarded(leaf: str, handler: Any) -> Any:
         except Exception as e:  # noqa: BLE001 - a client must never crash the daemon
             log.warning("%s query failed: %s", leaf, e)
             _try_reply(query, api.error(api.ErrorCode.FAILED, f"{type(e).__name__}: {e}"))
+
+    return answer
+
+
+def _shorter(key: Any, limit: int = 120) -> str:
+    text = str(key)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+# Keys the daemon publishes: asked by query, they are answered with where to subscribe.
+PUBLISHED = ("pose", "belief", "events", "alive")
+
+
+def _unknown_key(robot: str, answered: list[str]) -> Any:
+    """The queryable on ``placecell/<robot>/**``: silent where a query reaches a key that
+    another queryable answers (that one replies), a ``bad_request`` naming the key and
+    the keys there are otherwise."""
+    served = [zenoh.KeyExpr(zenoh_link.key(robot, leaf)) for leaf in answered]
+    prefix = zenoh_link.key(robot, "")
+
+    def answer(query: zenoh.Query) -> None:
+        if any(k.intersects(query.key_expr) for k in served):
+            return
+        leaf = str(query.key_expr).removeprefix(prefix)
+        hint = (f"{leaf} is published, not answered: subscribe to it"
+                if leaf in PUBLISHED else
+                f"no such key; the daemon answers {', '.join(answered)} under {prefix}")
+        _try_reply(query, api.error(api.ErrorCode.BAD_REQUEST,
+                                    f"{_shorter(query.key_expr)}: {hint}"))
 
     return answer
 
