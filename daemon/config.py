@@ -104,6 +104,9 @@ class ServiceSettings:
     restart_backoff_max_s: float = setting(1.0, gt=0.0, le=600.0)
     stop_timeout_s: float = setting(1.5, gt=0.0, le=30.0, doc="grace period on SIGTERM")
     stale_after_s: float = setting(1.0, gt=0.0, le=60.0, doc="a device silent this long is faulty")
+    min_processed_share: float = setting(
+        0.8, ge=0.0, le=1.0, doc="processing is degraded (status) while it keeps less than "
+        "this share of the camera's frames")
 
 
 @dataclass(frozen=True)

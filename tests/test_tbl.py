@@ -12,7 +12,7 @@ import pytest
 
 from daemon.mapping.settings import TblSettings
 from daemon.mapping.tbl import Progress, _zoom, cross_legs, keep_in_light
-from daemon.service.learning import learn_place, run_tbl
+from daemon.service.learning import run_tbl
 from daemon.vision.landmarks import LandmarkSet
 from daemon.vision.selection import select_static
 from daemon.vision.unwarp import Unwarper
@@ -118,7 +118,7 @@ def test_refused_when_the_base_cannot_move() -> None:
     config = with_sections(lockstep_config(world=CORRIDOR), base_sim={"can_move": False})
     camera, base, _ = _devices(config)
     with pytest.raises(LearningError, match="cannot move"):
-        learn_place(camera, base, Unwarper(config.mirror, config.panorama), TblSettings())
+        run_tbl(camera, base, Unwarper(config.mirror, config.panorama), TblSettings())
 
 
 def test_abort_stops_the_robot_and_returns_nothing() -> None:
@@ -131,8 +131,8 @@ def test_abort_stops_the_robot_and_returns_nothing() -> None:
             abort.set()
 
     with pytest.raises(LearningAbortedError):
-        learn_place(camera, base, Unwarper(config.mirror, config.panorama), TblSettings(),
-                    progress=progress, abort=abort)
+        run_tbl(camera, base, Unwarper(config.mirror, config.panorama), TblSettings(),
+                progress=progress, abort=abort)
     robot.advance_to(robot._t_ns + int(2e9))
     assert not robot.status().moving
 
@@ -144,7 +144,7 @@ def test_refused_when_frames_stop(tmp_path: Path) -> None:
     config = lockstep_config(scenario=str(scenario), realtime=True)
     camera, base, robot = _devices(config)
     with pytest.raises(LearningError, match="frames stopped"):
-        learn_place(camera, base, Unwarper(config.mirror, config.panorama),
-                    TblSettings(frame_timeout_s=0.5))
+        run_tbl(camera, base, Unwarper(config.mirror, config.panorama),
+                TblSettings(frame_timeout_s=0.5))
     robot.advance_to(robot.wall_time_ns() + int(2e9))
     assert not robot.status().moving  # stopped after the refusal

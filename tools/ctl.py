@@ -70,11 +70,35 @@ def _print(obj: Any) -> None:
     print(json.dumps(obj, separators=(",", ":")), flush=True)
 
 
+# What to run next, by the daemon's stable reason (or code) for a refusal.
+HINTS = {
+    "job_running": "wait for it (`placecellctl status` shows it), or stop it with "
+                   "`placecellctl abort`",
+    "localisation_mode": "switch to mapping first: `placecellctl mode mapping`",
+    "map_readonly": "the map file is read-only: `placecellctl status` says why; make it "
+                    "writable and restart placecelld",
+    "base_not_running": "`placecellctl status` shows the base's last error",
+    "base_cannot_move": "learning needs a base that can move: see [base] in the "
+                        "daemon's configuration",
+    "localiser_not_running": "`placecellctl status` shows the processing step's last error",
+    "empty_map": "learn a place first: `placecellctl learn`",
+    "not_found": "`placecellctl places` lists the places",
+}
+
+
+def hint(reply: dict[str, Any]) -> str | None:
+    """The placecellctl command to run after an error reply, if there is one."""
+    return HINTS.get(str(reply.get("reason") or reply.get("code")))
+
+
 def _error_exit(reply: dict[str, Any], as_json: bool) -> int:
     if as_json:
         _print(reply)
     else:
         print(f"placecellctl: {reply.get('code')}: {reply.get('message')}", file=sys.stderr)
+        advice = hint(reply)
+        if advice:
+            print(f"  hint: {advice}", file=sys.stderr)
     return _EXIT_OF_CODE.get(str(reply.get("code")), EXIT_REFUSED)
 
 
@@ -181,7 +205,10 @@ def _command(args: argparse.Namespace, leaf: str, payload: bytes,
 
 
 def cmd_abort(args: argparse.Namespace) -> int:
-    return _command(args, "cmd/abort", b"", lambda r: f"aborted: {r.get('aborted')}")
+    return _command(args, "cmd/abort", b"", lambda r: (
+        f"aborted the {r.get('aborted')} job started by {r.get('started_by', 'operator')}"
+        + (f" (label {r['label']!r})" if r.get("label") else "")
+        + ": the robot stopped, nothing stored"))
 
 
 def cmd_places(args: argparse.Namespace) -> int:
@@ -430,7 +457,8 @@ def format_status(st: dict[str, Any]) -> str:
                  f"{readonly}")
     job = st.get("job")
     lines.append("  job: none" if job is None else
-                 f"  job: {job['kind']} ({job['phase']}, {job['fraction']:.0%})")
+                 f"  job: {job['kind']} ({job['phase']}, {job['fraction']:.0%}) started by "
+                 f"{job.get('started_by', 'operator')}")
     for name, comp in st["components"].items():
         err = f", last error {comp['last_error_age_s']} s ago: {comp['last_error']}" \
             if comp.get("last_error") else ""

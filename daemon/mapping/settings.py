@@ -88,6 +88,10 @@ class AcquisitionSettings:
     most recent place, smoothed against distance travelled, has settled at its background."""
 
     enabled: bool = setting(True, doc="learn places on the robot's own in mapping mode")
+    operator_quiet_s: float = setting(30.0, ge=0.0, le=3600.0, doc="no place is learned on "
+                                      "the robot's own this long after an operator's command")
+    retry_after_s: float = setting(10.0, ge=0.0, le=3600.0, doc="after a learn of its own "
+                                   "that stored nothing, wait this long before the next")
     sample_step_m: float = setting(0.05, gt=0.0, le=1.0, doc="the LRP is sampled every this "
                                    "far travelled (frames while stationary or only turning "
                                    "add nothing)")

@@ -34,10 +34,24 @@ class ErrorCode(StrEnum):
     NOTHING_TO_ABORT = "nothing_to_abort"
 
 
+class Reason(StrEnum):
+    """Why a request was refused or found busy, stable like the codes: a client maps them
+    to its own advice (placecellctl names the command to run)."""
+
+    JOB_RUNNING = "job_running"  # a place is being learned
+    LOCALISATION_MODE = "localisation_mode"  # the map is read-only by the mode
+    MAP_READONLY = "map_readonly"  # the map file cannot be written
+    BASE_NOT_RUNNING = "base_not_running"
+    BASE_CANNOT_MOVE = "base_cannot_move"
+    LOCALISER_NOT_RUNNING = "localiser_not_running"
+    EMPTY_MAP = "empty_map"
+
+
 class RequestError(PlacecellError):
-    def __init__(self, code: ErrorCode, message: str) -> None:
+    def __init__(self, code: ErrorCode, message: str, reason: Reason | None = None) -> None:
         super().__init__(message)
         self.code = code
+        self.reason = reason
 
 
 @dataclass(frozen=True)
@@ -140,6 +154,8 @@ def result(**fields: Any) -> bytes:
     return zenoh_link.encode(REPLY_SCHEMA, {"kind": "result", **fields})
 
 
-def error(code: ErrorCode, message: str) -> bytes:
-    return zenoh_link.encode(REPLY_SCHEMA, {"kind": "error", "code": str(code),
-                                            "message": message})
+def error(code: ErrorCode, message: str, reason: Reason | None = None) -> bytes:
+    body = {"kind": "error", "code": str(code), "message": message}
+    if reason is not None:
+        body["reason"] = str(reason)
+    return zenoh_link.encode(REPLY_SCHEMA, body)

@@ -30,6 +30,7 @@ from daemon.service.components import (
     camera_component,
 )
 from daemon.service.foxglove_view import FoxgloveView
+from daemon.service.health import processing_state
 from daemon.service.learn_job import (
     BaseCommands,
     FrameFeed,
@@ -109,7 +110,10 @@ class Daemon:
         mailbox = LatestFrame(lockstep=cfg.camera.backend == "replay"
                               and cfg.camera.replay.speed == 0)
         inbox = OdometryInbox()
-        frame_taps, odo_taps = [], []
+        # A learn job reads frames and odometry as the devices deliver them, not as the
+        # processing step gets round to them: a busy CPU slows the pose, not the learn.
+        frame_taps: list[Any] = [self._job_frame]
+        odo_taps: list[Any] = [self._job_odometry]
         if self.recorder is not None:
             frame_taps.append(self.recorder.write_frame)
             odo_taps.append(self._record_odometry)
@@ -125,8 +129,7 @@ class Daemon:
         self.processing = ProcessingComponent(
             lambda: self._localiser(cfg.mapping.acquisition),
             mailbox, inbox, self._on_belief, lambda: sup.health["processing"],
-            odometry_taps=[self.mapper.on_odometry, self._job_odometry],
-            frame_taps=[self._job_frame])
+            odometry_taps=[self.mapper.on_odometry])
         for c in (self.camera, self.base, self.processing):
             sup.add(c)
 
@@ -226,11 +229,19 @@ class Daemon:
 
         try:
             request = api.parse(api.LearnRequest, _payload(query), "learn_place")
-            job = self._start_learning(request, reply)
+            self._operator_acted()
+            job = self._start_learning(request, reply, "operator")
         except api.RequestError as e:
-            reply("error", {"code": str(e.code), "message": str(e)})
+            reply("error", {"code": str(e.code), "message": str(e),
+                            **({} if e.reason is None else {"reason": str(e.reason)})})
             return
         log.info("learning a place (label %r) at the operator's request", job.label)
+
+    def _operator_acted(self) -> None:
+        """An operator's command: the autopilot keeps off the job for a while, so a
+        person's next command is not met by a learn of its own (design §11)."""
+        quiet = self.config.mapping.acquisition.operator_quiet_s
+        self._acquire_after = max(self._acquire_after, time.monotonic() + quiet)
 
     # ------------------------------------------------------------ autonomous acquisition
     def _maybe_acquire(self, belief: Belief) -> None:
@@ -267,42 +278,68 @@ class Daemon:
                 log.warning("autonomous learning: %s", fields.get("message"))
 
         try:
-            self._start_learning(api.LearnRequest(), log_reply)
+            self._start_learning(api.LearnRequest(), log_reply, "autopilot")
             log.info("learning a place on my own (%s)", "the first one" if decision is None
                      else f"place {decision.place_id}'s background reached")
         except api.RequestError as e:
             log.warning("autonomous learning not started: %s", e)
-            self._acquire_after = time.monotonic() + 10.0
+            self._acquire_after = time.monotonic() + acq.retry_after_s
 
-    def _start_learning(self, request: api.LearnRequest, reply: Any) -> LearnJob:
+    def _start_learning(self, request: api.LearnRequest, reply: Any,
+                        started_by: str) -> LearnJob:
+        """Start a learn job. One job at a time: an operator's learn pre-empts the
+        autopilot's (that one stops the robot and stores nothing); any other running job
+        makes the request busy."""
         if self.mode != "mapping":
             raise api.RequestError(api.ErrorCode.REFUSED, "the daemon is in localisation "
-                                   "mode: the map is read-only, no places are learned")
+                                   "mode: the map is read-only, no places are learned",
+                                   api.Reason.LOCALISATION_MODE)
         device = self.base.device
         if device is None or self.supervisor.health["base"].state != "running":
             raise api.RequestError(api.ErrorCode.REFUSED, "the base is not running: "
-                                   f"{self.supervisor.health['base'].last_error or 'starting'}")
+                                   f"{self.supervisor.health['base'].last_error or 'starting'}",
+                                   api.Reason.BASE_NOT_RUNNING)
         if not device.info.can_move:
             raise api.RequestError(api.ErrorCode.REFUSED, f"the base ({device.info.backend}) "
-                                   "cannot move: Turn Back and Look needs to drive the cross")
+                                   "cannot move: Turn Back and Look needs to drive the cross",
+                                   api.Reason.BASE_CANNOT_MOVE)
         camera = self.camera.device
         rate = float(camera.info.rate_hz) if camera is not None else 10.0
+        if started_by == "operator":
+            self._preempt_autopilot()
         with self._job_lock:
             if self._job is not None:
                 raise api.RequestError(api.ErrorCode.BUSY, "a place is being learned already "
-                                       f"({self._job.progress.phase}, "
+                                       f"(started by {self._job.started_by}, "
+                                       f"{self._job.progress.phase}, "
                                        f"{self._job.progress.fraction:.0%}): wait for it or "
-                                       "send cmd/abort")
+                                       "send cmd/abort", api.Reason.JOB_RUNNING)
             job = LearnJob(label=request.label,
                            settings=job_settings(self.config.tbl, request.extent_m),
                            unwarper=self._unwarper, feed=FrameFeed(rate),
                            mover=BaseCommands(lambda: self.base.device), mapper=self.mapper,
                            reply=reply, on_done=self._learning_done, seen=self._seen,
                            localisation=self.config.localisation,
-                           profile=self._place_profile)
+                           profile=self._place_profile,
+                           odometry_timeout_s=self.config.base.read_timeout_s,
+                           link_up=lambda: self.supervisor.health["base"].state == "running",
+                           started_by=started_by)
             self._job = job
             job.start()
         return job
+
+    def _preempt_autopilot(self) -> None:
+        """Stop the autopilot's learn, if one runs, and wait until it has ended (it
+        notices within a frame, or when frames stop: the TBL frame timeout)."""
+        job = self._job
+        if job is None or job.started_by != "autopilot":
+            return
+        log.info("an operator's learn pre-empts the autopilot's (%s, %.0f%%)",
+                 job.progress.phase, 100 * job.progress.fraction)
+        job.abort()
+        if not job.join(self.config.tbl.frame_timeout_s + self.config.service.stop_timeout_s):
+            raise api.RequestError(api.ErrorCode.BUSY, "the autopilot's learn did not stop in "
+                                   "time: try again", api.Reason.JOB_RUNNING)
 
     def _place_profile(self, reference_panorama: np.ndarray | None) -> np.ndarray | None:
         localiser = self.processing.localiser
@@ -316,8 +353,10 @@ class Daemon:
         with self._job_lock:
             if self._job is job:
                 self._job = None
-        if outcome.place is None and self.config.mapping.acquisition.enabled:
-            self._acquire_after = time.monotonic() + 10.0  # do not retry at once
+        acq = self.config.mapping.acquisition
+        if outcome.place is None and acq.enabled and job.started_by == "autopilot":
+            self._acquire_after = max(self._acquire_after,  # do not retry at once
+                                      time.monotonic() + acq.retry_after_s)
         localiser = self.processing.localiser
         if outcome.place is not None:
             p = outcome.place
@@ -337,9 +376,9 @@ class Daemon:
                                    **{"from": t.from_id, "to": t.to_id})
         else:
             self.publish_event("learning_ended", code=str(outcome.error),
-                               message=outcome.message)
+                               message=outcome.message, started_by=job.started_by)
 
-    def _job_odometry(self, samples: list[Any]) -> None:
+    def _job_odometry(self, samples: list[Any], base: Any) -> None:
         job = self._job
         if job is not None:
             job.feed.put_odometry(samples)
@@ -352,23 +391,29 @@ class Daemon:
     def _answer_abort(self, query: zenoh.Query) -> None:
         received_ns = time.monotonic_ns()
         api.parse(api.NoParameters, _payload(query), "abort")
+        self._operator_acted()
         job = self._job
         if job is None:
             query.reply(query.key_expr, api.error(api.ErrorCode.NOTHING_TO_ABORT,
                                                   "no job is running"))
             return
         job.abort()
-        query.reply(query.key_expr, api.result(aborted=job.kind, received_ns=received_ns,
-                                               stop_sent_ns=time.monotonic_ns()))
+        stop_sent_ns = time.monotonic_ns()
+        log.info("abort: stopped the %s job started by %s", job.kind, job.started_by)
+        query.reply(query.key_expr, api.result(aborted=job.kind, started_by=job.started_by,
+                                               label=job.label, received_ns=received_ns,
+                                               stop_sent_ns=stop_sent_ns))
 
     # ------------------------------------------------------------------ pose
     def _answer_set_pose(self, query: zenoh.Query) -> None:
         """cmd/set_pose: track from a pose the operator gives (design §7)."""
         request = api.parse(api.SetPoseRequest, _payload(query), "set_pose")
+        self._operator_acted()
         localiser = self.processing.localiser
         if localiser is None:
             why = self.supervisor.health["processing"].last_error or "starting"
-            raise api.RequestError(api.ErrorCode.REFUSED, f"the localiser is not running: {why}")
+            raise api.RequestError(api.ErrorCode.REFUSED, f"the localiser is not running: {why}",
+                                   api.Reason.LOCALISER_NOT_RUNNING)
         if request.place is None or not self.mapper.has_place(request.place):
             raise api.RequestError(api.ErrorCode.NOT_FOUND, f"place {request.place} is not in "
                                    f"the map ({self.mapper.place_count()} places)")
@@ -382,13 +427,15 @@ class Daemon:
     def _answer_relocalise(self, query: zenoh.Query) -> None:
         """cmd/relocalise: search the whole map for the robot (design §9)."""
         api.parse(api.NoParameters, _payload(query), "relocalise")
+        self._operator_acted()
         localiser = self.processing.localiser
         if localiser is None:
             why = self.supervisor.health["processing"].last_error or "starting"
-            raise api.RequestError(api.ErrorCode.REFUSED, f"the localiser is not running: {why}")
+            raise api.RequestError(api.ErrorCode.REFUSED, f"the localiser is not running: {why}",
+                                   api.Reason.LOCALISER_NOT_RUNNING)
         if self.mapper.place_count() == 0:
             raise api.RequestError(api.ErrorCode.REFUSED, "the map has no places to "
-                                   "relocalise in")
+                                   "relocalise in", api.Reason.EMPTY_MAP)
         localiser.relocalise()
         log.info("relocalisation requested")
         query.reply(query.key_expr, api.result(relocalising=True,
@@ -400,12 +447,14 @@ class Daemon:
         request = api.parse(api.ModeRequest, _payload(query), "mode")
         if request.mode == "mapping" and self.map_readonly_reason is not None:
             raise api.RequestError(api.ErrorCode.REFUSED, "mapping needs a writable map: "
-                                   f"{self.map_readonly_reason}")
+                                   f"{self.map_readonly_reason}", api.Reason.MAP_READONLY)
         if request.mode and request.mode != self.mode:
+            self._operator_acted()
             with self._job_lock:
                 if self._job is not None:
                     raise api.RequestError(api.ErrorCode.BUSY, "a place is being learned: "
-                                           "wait for it or send cmd/abort, then switch")
+                                           "wait for it or send cmd/abort, then switch",
+                                           api.Reason.JOB_RUNNING)
                 previous, self.mode = self.mode, request.mode
             log.info("mode %s -> %s at the operator's request", previous, self.mode)
             self.publish_event("mode_changed", mode=self.mode, previous=previous)
@@ -539,7 +588,8 @@ class Daemon:
             self._maybe_acquire(belief)
         except PlacecellError as e:  # the map file refused: say so, keep localising
             log.error("autonomous acquisition: %s", e)
-            self._acquire_after = time.monotonic() + 10.0
+            self._acquire_after = time.monotonic() + \
+                self.config.mapping.acquisition.retry_after_s
         if self._scene is not None:
             self._show(belief, body, in_map)
 
@@ -564,25 +614,26 @@ class Daemon:
         now = time.monotonic_ns()
         health = self.supervisor.health
         belief = self._belief
+        components = describe(health, now)
+        rates = {"frames_hz": round(health["camera"].rate.rate_hz(now), 2),
+                 "odometry_hz": round(health["base"].rate.rate_hz(now), 2),
+                 "processed_hz": round(health["processing"].rate.rate_hz(now), 2)}
+        components["processing"]["state"] = processing_state(
+            health["processing"].state, rates["processed_hz"], rates["frames_hz"],
+            self.config.service.min_processed_share)
         return {
             "robot": self.robot,
             "stamp_ns": now,
             "uptime_s": round((now - self._started_ns) / 1e9, 3),
-            "healthy": self.supervisor.all_running(),
-            "components": describe(health, now),
-            "rates": {
-                "frames_hz": round(health["camera"].rate.rate_hz(now), 2),
-                "odometry_hz": round(health["base"].rate.rate_hz(now), 2),
-                "processed_hz": round(health["processing"].rate.rate_hz(now), 2),
-            },
+            "healthy": all(c["state"] == "running" for c in components.values()),
+            "components": components,
+            "rates": rates,
             "belief": self._belief_summary(belief, now),
             "map": {"path": self.config.map.path, "places": self.mapper.place_count(),
                     "transitions": self.mapper.transition_count(),
                     "mode": self.mode, "writable": not self.map.readonly,
                     "readonly_reason": self.map_readonly_reason},
-            "job": None if self._job is None else {
-                "kind": self._job.kind, "phase": self._job.progress.phase,
-                "fraction": round(self._job.progress.fraction, 3)},
+            "job": self._job_summary(),
             "versions": {
                 "placecell": daemon.__version__,
                 "python": platform.python_version(),
@@ -591,6 +642,13 @@ class Daemon:
                 "numpy": np.__version__,
             },
         }
+
+    def _job_summary(self) -> dict[str, Any] | None:
+        job = self._job
+        return None if job is None else {
+            "kind": job.kind, "phase": job.progress.phase,
+            "fraction": round(job.progress.fraction, 3), "started_by": job.started_by,
+            "label": job.label}
 
     def _belief_summary(self, belief: Belief | None, now_ns: int) -> dict[str, Any]:
         """The belief as status reports it: honest about missing sensors (SPEC §11)."""
@@ -698,7 +756,7 @@ def _guarded(leaf: str, handler: Any) -> Any:
         try:
             handler(query)
         except api.RequestError as e:
-            _try_reply(query, api.error(e.code, str(e)))
+            _try_reply(query, api.error(e.code, str(e), e.reason))
         except Exception as e:  # noqa: BLE001 - a client must never crash the daemon
             log.warning("%s query failed: %s", leaf, e)
             _try_reply(query, api.error(api.ErrorCode.FAILED, f"{type(e).__name__}: {e}"))

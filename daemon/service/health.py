@@ -63,3 +63,13 @@ class ComponentHealth:
             "rate_hz": round(self.rate.rate_hz(now_ns), 2),
             **self.detail,
         }
+
+
+def processing_state(state: str, processed_hz: float, frames_hz: float,
+                     min_share: float) -> str:
+    """The processing step's state as status reports it: ``degraded`` while it runs but
+    keeps less than ``min_share`` of the frames the camera delivers (the rest skipped:
+    a busy CPU), else its supervisor state."""
+    if state == "running" and frames_hz > 0.0 and processed_hz < min_share * frames_hz:
+        return "degraded"
+    return state

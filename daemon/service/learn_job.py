@@ -30,6 +30,7 @@ from daemon.service.learning import drive_tbl, odometry_at_frame
 from daemon.service.mapper import Link, Mapper, Seen
 from daemon.vision.unwarp import Unwarper
 from hal.base.base import BaseInfo, BaseStatus
+from hal.base.settings import BaseSettings
 from kernel.errors import (
     CommandRejectedError,
     DeviceTimeoutError,
@@ -85,20 +86,27 @@ class FrameFeed:
 
 
 class FeedSensors:
-    """:class:`daemon.service.learning.Sensors` over a :class:`FrameFeed`."""
+    """:class:`daemon.service.learning.Sensors` over a :class:`FrameFeed`: each wait for
+    odometry is the base's read timeout, and a late sample is told from a dead link by
+    ``link_up`` (the base component running)."""
 
-    def __init__(self, feed: FrameFeed, settings: TblSettings) -> None:
+    def __init__(self, feed: FrameFeed, settings: TblSettings, odometry_timeout_s: float,
+                 link_up: Callable[[], bool]) -> None:
         self.feed = feed
         self.settings = settings
         self.rate_hz = feed.rate_hz
         self.buffer = OdometryBuffer()
+        self._odometry_timeout_s = odometry_timeout_s
+        self._link_up = link_up
 
     def frame(self) -> tuple[Frame, Odometry]:
         try:
             frame = self.feed.next_frame(self.settings.frame_timeout_s)
         except DeviceTimeoutError as e:
             raise LearningError(f"frames stopped arriving during learning: {e}") from e
-        return frame, odometry_at_frame(self.buffer, frame, lambda: self.feed.odometry(0.2))
+        return frame, odometry_at_frame(
+            self.buffer, frame, lambda: self.feed.odometry(self._odometry_timeout_s),
+            self.settings, self._link_up)
 
 
 class BaseCommands:
@@ -154,13 +162,21 @@ class LearnJob:
                  on_done: Callable[[LearnJob, LearnOutcome], None],
                  seen: Callable[[], Seen | None] = lambda: None,
                  localisation: LocalisationSettings | None = None,
-                 profile: Callable[[np.ndarray | None], np.ndarray | None] = lambda _: None
-                 ) -> None:
+                 profile: Callable[[np.ndarray | None], np.ndarray | None] = lambda _: None,
+                 odometry_timeout_s: float = BaseSettings().read_timeout_s,
+                 link_up: Callable[[], bool] = lambda: True,
+                 started_by: str = "operator") -> None:
         """``seen``: the localiser's reliable estimate of the robot now, if any (it joins
         the new place to the map, design §6); ``localisation``: how look-alike places
         are found (design §5); ``profile``: the local space profile of a reference
-        panorama (design §4), None while the localiser cannot tell."""
+        panorama (design §4), None while the localiser cannot tell;
+        ``odometry_timeout_s`` and ``link_up``: see :class:`FeedSensors`; ``started_by``:
+        ``operator`` or ``autopilot`` (autonomous acquisition, which an operator's learn
+        pre-empts)."""
         self.label = label
+        self.started_by = started_by
+        self._odometry_timeout_s = odometry_timeout_s
+        self._link_up = link_up
         self._profile = profile
         self.localisation = localisation or LocalisationSettings()
         self._seen = seen
@@ -206,7 +222,9 @@ class LearnJob:
         outcome = LearnOutcome(None, ErrorCode.FAILED, "learning did not finish")
         try:
             self._reply("progress", {"phase": "starting", "fraction": 0.0})
-            tbl = drive_tbl(FeedSensors(self.feed, self.settings), self.mover, self.unwarper,
+            sensors = FeedSensors(self.feed, self.settings, self._odometry_timeout_s,
+                                  self._link_up)
+            tbl = drive_tbl(sensors, self.mover, self.unwarper,
                             self.settings, progress=self._on_progress,
                             abort=self.abort_requested, on_start=self._begin)
             if self.abort_requested.is_set():

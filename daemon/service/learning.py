@@ -12,15 +12,16 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable
 from typing import Any, Protocol
 
 from daemon.localisation.odometry import OdometryBuffer
 from daemon.mapping.settings import TblSettings
 from daemon.mapping.tbl import CandidateChooser, Progress, TurnBackAndLook
-from daemon.vision.landmarks import LandmarkSet
 from daemon.vision.unwarp import Unwarper
 from hal.base.base import BaseInfo, BaseStatus
+from hal.base.settings import BaseSettings
 from kernel.errors import (
     DeviceTimeoutError,
     HalError,
@@ -54,17 +55,29 @@ class Mover(Protocol):
 
 
 def odometry_at_frame(buffer: OdometryBuffer, frame: Frame,
-                      read: Callable[[], list[Odometry]]) -> Odometry:
-    """The odometry at ``frame``'s stamp, reading more samples (``read``) until the buffer
-    reaches just past it."""
-    for _ in range(50):
+                      read: Callable[[], list[Odometry]], settings: TblSettings,
+                      link_up: Callable[[], bool] = lambda: True) -> Odometry:
+    """The odometry at ``frame``'s stamp, reading more samples (``read``, which waits the
+    base's configured read timeout and raises DeviceTimeoutError when none came) until
+    the buffer reaches just past it.
+
+    A late sample is told from a dead link: while ``link_up`` says the base is running,
+    samples slowed by a busy CPU are waited for, up to ``frame_timeout_s`` in all; a link
+    that is down ends learning at once, saying so."""
+    deadline = time.monotonic() + settings.frame_timeout_s
+    while True:
         latest = buffer.latest
         if latest is not None and latest.stamp_ns >= frame.stamp_ns:
             break
         try:
             buffer.extend(read())
         except DeviceTimeoutError as e:
-            raise LearningError(f"odometry stopped arriving during learning: {e}") from e
+            if not link_up():
+                raise LearningError(f"the odometry link went down during learning: {e}"
+                                    ) from e
+            if time.monotonic() >= deadline:
+                raise LearningError(f"odometry fell {settings.frame_timeout_s:.1f} s behind "
+                                    f"the frames during learning ({e})") from e
     odo = buffer.at(frame.stamp_ns, max_extrapolation_ns=100_000_000)
     if odo is None:
         raise LearningError("no odometry at the frame's time: cannot learn")
@@ -72,11 +85,14 @@ def odometry_at_frame(buffer: OdometryBuffer, frame: Frame,
 
 
 class DeviceSensors:
-    """Frames and odometry read from the devices themselves (the evaluator, tests)."""
+    """Frames and odometry read from the devices themselves (the evaluator, tests).
+    ``odometry_timeout_s``: how long one read of the base waits ([base] read_timeout_s)."""
 
     def __init__(self, camera: Any, base: Any, settings: TblSettings,
+                 odometry_timeout_s: float,
                  on_odometry: Callable[[list[Odometry]], None] | None = None) -> None:
         self.camera, self.base, self.settings = camera, base, settings
+        self.odometry_timeout_s = odometry_timeout_s
         self.odometry = OdometryBuffer()
         self.rate_hz = float(getattr(camera.info, "rate_hz", 0.0) or 10.0)
         self._on_odometry = on_odometry  # every sample read is also handed here
@@ -86,29 +102,23 @@ class DeviceSensors:
             frame: Frame = self.camera.read(self.settings.frame_timeout_s)
         except DeviceTimeoutError as e:
             raise LearningError(f"frames stopped arriving during learning: {e}") from e
-        return frame, odometry_at_frame(self.odometry, frame, self._read)
+        return frame, odometry_at_frame(self.odometry, frame, self._read, self.settings)
 
     def _read(self) -> list[Odometry]:
-        samples: list[Odometry] = self.base.read(0.2)
+        samples: list[Odometry] = self.base.read(self.odometry_timeout_s)
         if self._on_odometry is not None:
             self._on_odometry(samples)
         return samples
 
 
-def learn_place(camera: Any, base: Any, unwarper: Unwarper, settings: TblSettings, *,
-                progress: ProgressCallback | None = None,
-                abort: threading.Event | None = None) -> LandmarkSet:
-    """Turn Back and Look at the current pose with the devices; the place's landmark set."""
-    return run_tbl(camera, base, unwarper, settings, progress=progress, abort=abort).result()
-
-
 def run_tbl(camera: Any, base: Any, unwarper: Unwarper, settings: TblSettings, *,
             progress: ProgressCallback | None = None,
             abort: threading.Event | None = None,
-            choose: CandidateChooser | None = None) -> TurnBackAndLook:
+            choose: CandidateChooser | None = None,
+            odometry_timeout_s: float = BaseSettings().read_timeout_s) -> TurnBackAndLook:
     """:func:`drive_tbl` reading the camera and base devices directly."""
-    return drive_tbl(DeviceSensors(camera, base, settings), base, unwarper, settings,
-                     progress=progress, abort=abort, choose=choose)
+    return drive_tbl(DeviceSensors(camera, base, settings, odometry_timeout_s), base,
+                     unwarper, settings, progress=progress, abort=abort, choose=choose)
 
 
 def drive_tbl(sensors: Sensors, mover: Mover, unwarper: Unwarper, settings: TblSettings, *,

@@ -96,7 +96,8 @@ class Run:
         self.store = MapStore.open(map_path or Path(self._tmp.name) / "map.db",
                                    geometry_checksum(cfg.mirror, cfg.panorama))
         self.mapper = Mapper(self.store, cfg.odometry)
-        self.sensors = DeviceSensors(self.camera, self.base, cfg.tbl, on_odometry=self._odometry)
+        self.sensors = DeviceSensors(self.camera, self.base, cfg.tbl,
+                                     cfg.base.read_timeout_s, on_odometry=self._odometry)
         self.frame_filter = frame_filter
         self.references: dict[int, SE2] = {}  # true reference pose of each place (truth)
         self.process_s: list[float] = []

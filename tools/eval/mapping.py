@@ -181,7 +181,8 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
         localiser.add_odometry(samples)
         mapper.on_odometry(samples)
 
-    sensors = DeviceSensors(camera, base, cfg.tbl, on_odometry=odometry)
+    sensors = DeviceSensors(camera, base, cfg.tbl, cfg.base.read_timeout_s,
+                            on_odometry=odometry)
     refs: list[tuple[float, float, float]] = []
     learn_s: list[float] = []
     failures, path_m = 0, 0.0

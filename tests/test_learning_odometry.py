@@ -1,0 +1,56 @@
+"""Learning waits for odometry with the configured timeouts and tells a late sample from a
+dead link (issue 31, point 4): a busy CPU that delays the base's samples is waited for;
+a link that is down ends the learn at once, saying so."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from daemon.localisation.odometry import OdometryBuffer
+from daemon.mapping.settings import TblSettings
+from daemon.service.learning import odometry_at_frame
+from kernel.errors import DeviceTimeoutError, LearningError
+from kernel.types import Frame, Odometry
+
+FRAME = Frame(np.zeros((4, 4), np.uint8), 1_000_000_000, 1)
+
+
+def _sample(stamp_ns: int) -> Odometry:
+    return Odometry(0.1, 0.0, 0.0, stamp_ns, stamp_ns // 1000)
+
+
+class Reads:
+    """A base read that times out ``late`` times, then delivers a sample past the frame
+    (or never, with ``late`` None)."""
+
+    def __init__(self, late: int | None) -> None:
+        self.late, self.calls = late, 0
+
+    def __call__(self) -> list[Odometry]:
+        self.calls += 1
+        if self.late is None or self.calls <= self.late:
+            raise DeviceTimeoutError("no odometry within 0.5 s")
+        return [_sample(FRAME.stamp_ns - 10_000_000), _sample(FRAME.stamp_ns + 10_000_000)]
+
+
+def test_late_samples_on_a_live_link_are_waited_for() -> None:
+    reads = Reads(late=3)
+    odo = odometry_at_frame(OdometryBuffer(), FRAME, reads, TblSettings(), lambda: True)
+    assert odo.stamp_ns == FRAME.stamp_ns and odo.x == pytest.approx(0.1)
+    assert reads.calls == 4
+
+
+def test_a_dead_link_ends_learning_at_the_first_timeout() -> None:
+    reads = Reads(late=None)
+    with pytest.raises(LearningError, match="link went down"):
+        odometry_at_frame(OdometryBuffer(), FRAME, reads, TblSettings(), lambda: False)
+    assert reads.calls == 1
+
+
+def test_a_live_link_that_never_catches_up_ends_after_the_frame_timeout() -> None:
+    reads = Reads(late=None)
+    with pytest.raises(LearningError, match="fell 0.1 s behind"):
+        odometry_at_frame(OdometryBuffer(), FRAME, reads, TblSettings(frame_timeout_s=0.1),
+                          lambda: True)
+    assert reads.calls > 1
