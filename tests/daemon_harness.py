@@ -144,3 +144,16 @@ def wait_for(predicate: Any, timeout_s: float, interval_s: float = 0.05) -> bool
             return True
         time.sleep(interval_s)
     return bool(predicate())
+
+
+@contextlib.contextmanager
+def busy_loops(n: int = 2) -> Iterator[None]:
+    """``n`` processes spinning on the CPU beside the test: a robot's computer is never
+    idle (the tests that must hold under load run inside this)."""
+    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
+    try:
+        yield
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait(10)

@@ -1,6 +1,7 @@
 """A client process for the load test (tests/test_service_load.py): ``--sessions`` zenoh
 sessions, each its own subscriber on ``pose`` and ``belief``, for ``--duration`` seconds;
-then, as JSON on stdout, the pose stamps and the belief count each session received."""
+``{"ready": true}`` once every session receives both; then, as JSON on stdout, the pose
+stamps and the belief count each session received."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ def main() -> None:
     p.add_argument("--sessions", type=int, default=10)
     p.add_argument("--duration", type=float, default=60.0)
     args = p.parse_args()
-    lock = threading.Lock()
+    lock = threading.Condition()
     received: list[dict[str, Any]] = []
     sessions = []
     for _ in range(args.sessions):
@@ -32,15 +33,21 @@ def main() -> None:
             stamp = json.loads(sample.payload.to_bytes())["stamp_ns"]
             with lock:
                 got["pose"].append(stamp)
+                lock.notify_all()
 
         def on_belief(sample: Any, got: dict[str, Any] = got) -> None:
             with lock:
                 got["belief"] += 1
+                lock.notify_all()
 
         session.declare_subscriber(f"placecell/{args.robot}/pose", on_pose)
         session.declare_subscriber(f"placecell/{args.robot}/belief", on_belief)
         sessions.append(session)
-    print(json.dumps({"ready": True}), flush=True)
+    # Ready once every subscription is routed: each session has a pose and a belief.
+    with lock:
+        routed = lock.wait_for(lambda: all(g["pose"] and g["belief"] for g in received),
+                               args.duration)
+    print(json.dumps({"ready": routed}), flush=True)
     time.sleep(args.duration)
     with lock:
         out = json.dumps({"sessions": received})

@@ -152,7 +152,12 @@ def _learn_two(config: Path, truth: Truth) -> tuple[dict[str, Any], dict[str, An
     assert wait_for(lambda: truth.stopped_since(time.monotonic_ns() - 1_500_000_000), 60, 0.5)
     # A second learn; a concurrent third is refused while it runs.
     second = _learn_popen(config, "door")
-    time.sleep(4.0)
+
+    def learning() -> bool:  # the second learn's job is running in the daemon
+        st = _ctl(config, "status", "--json", timeout=30)
+        return st.returncode == 0 and json.loads(st.stdout)["job"] is not None
+
+    assert wait_for(learning, 60, 0.2), "the second learn never started"
     refused = _ctl(config, "learn", "--label", "intruder")
     assert refused.returncode == 4, refused.stderr
     assert "being learned already" in refused.stderr

@@ -148,3 +148,42 @@ def test_refused_when_frames_stop(tmp_path: Path) -> None:
                 TblSettings(frame_timeout_s=0.5))
     robot.advance_to(robot.wall_time_ns() + int(2e9))
     assert not robot.status().moving  # stopped after the refusal
+
+
+class LosesALeg:
+    """A base that takes the ``lost``-th move (7: out along -y, after +x, back, -x, back,
+    +y, back) and says it is done without driving it: a command lost on the link with a
+    stale "done" (issue 32: the slcan cross that never reached -y)."""
+
+    def __init__(self, base, lost: int) -> None:  # type: ignore[no-untyped-def]
+        self.base, self.lost, self.moves = base, lost, 0
+
+    @property
+    def info(self):  # type: ignore[no-untyped-def]
+        return self.base.info
+
+    def move_relative(self, dx: float, dy: float, dyaw: float, speed: float) -> None:
+        self.moves += 1
+        if self.moves != self.lost:
+            self.base.move_relative(dx, dy, dyaw, speed)
+
+    def status(self):  # type: ignore[no-untyped-def]
+        return self.base.status()
+
+    def stop(self) -> None:
+        self.base.stop()
+
+
+def test_a_leg_the_base_did_not_drive_fails_the_learn_before_anything_is_stored() -> None:
+    from daemon.service.learning import DeviceSensors, drive_tbl
+
+    config = lockstep_config(world=CORRIDOR, start_pose=[0.0, 0.0, 0.0])
+    camera, base, robot = _devices(config)
+    mover = LosesALeg(base, lost=7)
+    settings = TblSettings()
+    with pytest.raises(LearningError, match=r"leg -y: .* driven of \(\+0.000, -0.500\)"):
+        drive_tbl(DeviceSensors(camera, base, settings, 0.5), mover,
+                  Unwarper(config.mirror, config.panorama), settings)
+    assert mover.moves == 7
+    robot.advance_to(robot._t_ns + int(2e9))
+    assert not robot.status().moving

@@ -19,6 +19,7 @@ from hal.base.xr4000_can import Xr4000CanBase
 from hal.base.xr4000_serial import Xr4000SerialBase
 from hal.sim.factory import build_sim_robot
 from kernel.errors import DeviceIOError, DeviceTimeoutError
+from tests.daemon_harness import busy_loops
 from tests.links import emulator, pty_pair, stop
 from tests.sim_helpers import lockstep_config
 from tools.xr4000.emulator import Emulator, SimSource
@@ -58,13 +59,15 @@ def _wait_for_link(base: Any, into: list[Odometry], limit_s: float = 20.0) -> No
 
 
 def _run_cross(base: Any, into: list[Odometry]) -> None:
+    """Each leg once the last is done. A read may time out on a busy machine (the
+    emulator starved for a moment); the leg's own limit is what fails the test."""
     for dx, dy in CROSS:
         base.move_relative(dx, dy, 0.0, 0.2)
-        into += base.read(0.5)
         end = time.monotonic() + 10
         while not (base.status().move_done and not base.status().moving):
             assert time.monotonic() < end, "move did not finish"
-            into += base.read(0.5)
+            with contextlib.suppress(DeviceTimeoutError):
+                into += base.read(0.5)
 
 
 def _truth(path: Path) -> list[dict[str, Any]]:
@@ -105,8 +108,9 @@ def _check_cross(truth: list[dict[str, Any]]) -> None:
 
 @pytest.mark.parametrize("transport", ["serial", "slcan"])
 def test_end_to_end_and_tbl_cross(tmp_path: Path, transport: str) -> None:
+    """With two busy loops beside it (issue 32): every leg of the cross driven to 0.5 m."""
     truth_path, stats_path = tmp_path / "truth.jsonl", tmp_path / "stats.json"
-    with pty_pair(tmp_path) as pair:
+    with busy_loops(), pty_pair(tmp_path) as pair:
         base = _serial(pair.b) if transport == "serial" else _slcan(pair.b)
         base.open()
         link = ["--serial", str(pair.a)] if transport == "serial" else [
@@ -126,6 +130,61 @@ def test_end_to_end_and_tbl_cross(tmp_path: Path, transport: str) -> None:
     _check_quantisation(delivered, _truth(truth_path), base)
     _check_cross(_truth(truth_path))
     assert json.loads(stats_path.read_text())["counts"]["MovCmd"] == 8
+
+
+def test_a_dropped_acknowledgement_is_resent_on_serial_and_never_driven_twice(
+        tmp_path: Path) -> None:
+    """The third move's ACK is lost: the link sends the move again with its id, the
+    controller answers the repeat without driving it again, and the cross is exact."""
+    truth_path, stats_path = tmp_path / "truth.jsonl", tmp_path / "stats.json"
+    with pty_pair(tmp_path) as pair:
+        base = _serial(pair.b)
+        base.open()
+        emu = emulator(["--serial", str(pair.a), "--drop-answer", "3", "--truth-out",
+                        str(truth_path), "--stats-out", str(stats_path)])
+        delivered: list[Odometry] = []
+        try:
+            _wait_for_link(base, delivered)
+            _run_cross(base, delivered)
+            _collect(base, 0.5, delivered)
+        finally:
+            stop(emu)
+            base.close()
+    stats = json.loads(stats_path.read_text())
+    assert stats["injected"]["dropped_answers"] == 1
+    assert stats["counts"]["MovCmd"] == 8 and stats["counts"]["repeated_commands"] == 1
+    assert base.stats()["command_resends"] == 1 and base.stats()["acks"] == 8
+    _check_cross(_truth(truth_path))
+
+
+def test_an_unanswered_move_on_can_fails_clearly_and_stops_the_base(tmp_path: Path
+                                                                     ) -> None:
+    """CAN frames carry no id, so a repeated move could be driven twice: an unanswered
+    move is not sent again; the base is stopped and the caller told. A stop whose answer
+    is lost is sent again (stopping twice is stopping)."""
+    stats_path = tmp_path / "stats.json"
+    with pty_pair(tmp_path) as pair:
+        base = _slcan(pair.b)
+        base.open()
+        # Answers: 1 the first move, 2 a stop (lost), 3 its repeat, 4 the second move (lost),
+        # 5 the stop after it.
+        emu = emulator(["--can", f"slcan:{pair.a}", "--drop-answer", "2", "--drop-answer",
+                        "4", "--stats-out", str(stats_path)])
+        delivered: list[Odometry] = []
+        try:
+            _wait_for_link(base, delivered)
+            base.move_relative(0.2, 0.0, 0.0, 0.2)
+            base.stop()
+            with pytest.raises(DeviceTimeoutError, match="not sent again.*stopped"):
+                base.move_relative(0.2, 0.0, 0.0, 0.2)
+            _collect(base, 0.5, delivered)
+        finally:
+            stop(emu)
+            base.close()
+    stats = json.loads(stats_path.read_text())
+    assert stats["injected"]["dropped_answers"] == 2
+    assert stats["counts"]["MovCmd"] == 2 and stats["counts"]["StpCmd"] == 3
+    assert base.stats()["command_resends"] == 1 and base.stats()["command_timeouts"] == 1
 
 
 def test_serial_corruption_never_reaches_odometry(tmp_path: Path) -> None:

@@ -57,6 +57,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                    metavar="T_S", help="the sequence counter jumps by 1000 at T_S seconds")
     p.add_argument("--silence", type=_pair, action="append", default=[],
                    metavar="START:DURATION", help="send nothing for a while")
+    p.add_argument("--drop-answer", type=int, action="append", default=[], metavar="N",
+                   help="do not send the N-th answer to a command (1: the first); repeatable")
     p.add_argument("--stats-out", help="JSON file: what was sent and injected")
     p.add_argument("--truth-out", help="JSON lines: the simulated base's true pose per sample")
     return p.parse_args(argv)
@@ -85,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     plan = FaultPlan(args.corrupt_rate, args.drop_rate, args.garbage_rate, args.truncate_rate,
                      args.time_backwards_rate, args.error_frame_rate, tuple(args.seq_jump_at),
-                     tuple(args.silence))
+                     tuple(args.silence), tuple(args.drop_answer))
     emulator = Emulator(side, source, plan, seed=args.seed, truth_out=args.truth_out)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())

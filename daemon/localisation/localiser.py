@@ -137,6 +137,7 @@ class Localiser:
         self.acquisition = PlaceAcquisition(acquisition) if acquisition is not None \
             and acquisition.enabled else None
         self._watched: tuple[int, PreparedTemplates] | None = None
+        self._awaiting_place = False  # a decision was made: the new place comes next
         self._watched_learned = False  # learned where it began to be watched (its reference)
         self._watch_next: tuple[int, PreparedTemplates] | None = None  # from other threads
         self._known: dict[int, KnownPlace] = {}
@@ -200,6 +201,13 @@ class Localiser:
         frame on. Safe to call from another thread."""
         self.know_place(place)
         self._watch_next = (place.id, self._known[place.id].templates)
+
+    def learning_not_started(self) -> None:
+        """The place acquisition asked for was not learned (refused, failed, aborted, or
+        the daemon had a job already): acquisition watches the place the robot is
+        tracked in again, and asks again once that one has faded. Safe to call from
+        another thread."""
+        self._awaiting_place = False
 
     def place_learned(self, place: Place, transitions: list[Transition]) -> None:
         """A place just learned, with its transitions: acquisition watches it, and tracking
@@ -796,6 +804,14 @@ class Localiser:
         learned, self._watch_next = self._watch_next, None  # set from other threads
         if learned is not None:
             self._watch(learned[0], learned=True)
+            self._awaiting_place = False
+        if self._watched is None and not self._awaiting_place and self.mode == "track" \
+                and self.tracker is not None:
+            # Nothing watched and no place coming: after a restart on a map with places,
+            # or a decision whose learn did not happen. The place the robot is tracked
+            # in is watched from here, so acquisition goes on (never a "first" place on
+            # a map that has places: issue 31).
+            self._watch(self.tracker.place.id, learned=False)
         if self._watched is None and not self._meters:
             return None, None, None, ()
         prepared = prepare()
@@ -824,6 +840,7 @@ class Localiser:
             self._watch(known, learned=False)
             return place_id, lrp, None, background
         self._watched = None  # until the new place is learned and watched
+        self._awaiting_place = True
         self.acquisition.reset(None)
         return place_id, lrp, decision, background
 

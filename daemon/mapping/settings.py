@@ -29,6 +29,10 @@ class TblSettings:
                                "that hold up replace those that suffer most until it does")
     frame_timeout_s: float = setting(2.0, gt=0.0, le=30.0, doc="no frame this long: refuse")
     move_timeout_s: float = setting(20.0, gt=0.0, le=300.0, doc="one arm may take this long")
+    path_tolerance_m: float = setting(0.1, gt=0.0, le=1.0, doc="a leg the base calls done "
+                                      "must have been driven to this (or half the extent, if "
+                                      "less) by its odometry, else learning fails: a place is "
+                                      "never learned from a path it did not drive")
     search_cols: int = setting(12, ge=2, le=64, doc="tracking window half-width (columns)")
     search_rows: int = setting(6, ge=1, le=32, doc="tracking window half-height (rows)")
     initial_depth_m: float = setting(2.5, gt=0.0, le=50.0, doc="EKF prior depth (§4.6)")

@@ -118,6 +118,7 @@ class TurnBackAndLook:
         self.views: list[np.ndarray] = []
         self._commanded = False
         self._last_odometry = start
+        self._leg_start = start
 
     @property
     def done(self) -> bool:
@@ -134,6 +135,7 @@ class TurnBackAndLook:
             return None
         _, dx, dy = self.legs[self.leg]
         self._commanded = True
+        self._leg_start = self._last_odometry  # the robot at rest, before it moves
         return MoveCommand(dx, dy, 0.0, self.settings.speed_m_s)
 
     def on_frame(self, panorama: np.ndarray, odometry: Odometry, move_done: bool) -> Progress:
@@ -167,9 +169,27 @@ class TurnBackAndLook:
                 math.hypot(pose[0], pose[1]) >= self.settings.extent_m / 2:
             self.views.append(grey)  # half-way out along this arm
         if move_done and self._commanded:
+            self._check_leg(odometry)
             self.leg += 1
             self._commanded = False
         return self.progress()
+
+    def _check_leg(self, odometry: Odometry) -> None:
+        """The leg the base calls done was driven: its odometry since the command stands
+        within ``path_tolerance_m`` (at most half the extent) of the commanded move. A
+        move lost or cut short on the link, or a stale "done", would otherwise give a
+        place learned from a path the robot did not drive (issue 32)."""
+        name, dx, dy = self.legs[self.leg]
+        a = self._leg_start
+        c, s = math.cos(a.yaw), math.sin(a.yaw)
+        gx, gy = odometry.x - a.x, odometry.y - a.y
+        u, v = c * gx + s * gy, -s * gx + c * gy
+        tolerance = min(self.settings.path_tolerance_m, self.settings.extent_m / 2)
+        if math.hypot(u - dx, v - dy) > tolerance:
+            raise LearningError(
+                f"leg {name}: the base called the move done, but its odometry shows "
+                f"({u:+.3f}, {v:+.3f}) m driven of ({dx:+.3f}, {dy:+.3f}) m commanded: the "
+                "cross was not driven as planned, so no place is learned from it")
 
     def _predict(self, odometry: Odometry) -> None:
         a, b = self._last_odometry, odometry

@@ -258,12 +258,14 @@ class Daemon:
             self.mapper.set_background(place_id, background)
             self.publish_event("background_measured", place=place_id,
                                background_lrp=round(background, 4))
+        decision = belief.acquisition
         if not acq.enabled or self._job is not None \
                 or not belief.odometry_ok or time.monotonic() < self._acquire_after:
+            if decision is not None:  # not now: acquisition watches on and asks again
+                self._learning_not_started()
             return
-        decision = belief.acquisition
-        if decision is None and self.mapper.last_place is not None:
-            return
+        if decision is None and self.mapper.place_count() > 0:
+            return  # the first place only on an empty map: a restart resumes, not re-learns
         if decision is not None:
             self.mapper.set_background(decision.place_id, decision.background_lrp)
             localiser = self.processing.localiser
@@ -284,6 +286,12 @@ class Daemon:
         except api.RequestError as e:
             log.warning("autonomous learning not started: %s", e)
             self._acquire_after = time.monotonic() + acq.retry_after_s
+            self._learning_not_started()
+
+    def _learning_not_started(self) -> None:
+        localiser = self.processing.localiser
+        if localiser is not None:
+            localiser.learning_not_started()
 
     def _start_learning(self, request: api.LearnRequest, reply: Any,
                         started_by: str) -> LearnJob:
@@ -358,6 +366,8 @@ class Daemon:
             self._acquire_after = max(self._acquire_after,  # do not retry at once
                                       time.monotonic() + acq.retry_after_s)
         localiser = self.processing.localiser
+        if outcome.place is None:
+            self._learning_not_started()
         if outcome.place is not None:
             p = outcome.place
             added = self.mapper.graph.neighbours(p.id)

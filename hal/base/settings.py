@@ -41,6 +41,9 @@ class Xr4000SerialSettings:
     port: str = setting("/dev/ttyUSB0", doc="serial device of the XR4000 bridge")
     baud_rate: int = setting(115200, ge=1200, le=4_000_000)
     command_timeout_s: float = setting(0.5, gt=0.0, le=10.0, doc="wait for ACK/NAK")
+    command_retries: int = setting(2, ge=0, le=10, doc="a command unanswered in time is sent "
+                                   "again with its id this often (the controller answers a "
+                                   "repeated id without executing it twice)")
     silence_timeout_s: float = setting(0.5, gt=0.0, le=10.0, doc="no odometry this long = fault")
 
 
@@ -56,6 +59,10 @@ class Xr4000CanSettings:
     velocity_id: int = setting(0x202, ge=0, le=0x7FF)
     stop_id: int = setting(0x200, ge=0, le=0x7FF)
     command_timeout_s: float = setting(0.5, gt=0.0, le=10.0)
+    command_retries: int = setting(2, ge=0, le=10, doc="stop and velocity commands unanswered "
+                                   "in time are sent again this often; a move is not (CAN "
+                                   "frames carry no id to tell a repeat): it fails, the base "
+                                   "stopped")
     silence_timeout_s: float = setting(0.5, gt=0.0, le=10.0)
 
     def __post_init__(self) -> None:

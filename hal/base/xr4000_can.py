@@ -7,6 +7,7 @@ Commands are confirmed by the controller's answer frame (0x182, see xr4000_proto
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 import time
@@ -43,6 +44,9 @@ def _clamp16(v: int, signed: bool = True) -> int:
     if not lo <= v <= hi:
         raise ValueError(f"{v} does not fit the 16-bit CAN field")
     return v
+
+
+log = logging.getLogger(__name__)
 
 
 class Xr4000CanBase(Xr4000Link):
@@ -106,33 +110,69 @@ class Xr4000CanBase(Xr4000Link):
     def _answer(self, msg: object) -> None:
         if isinstance(msg, CanAnswer):
             with self._cond:
+                if msg.command == CMD_MOVE and msg.result == 0:
+                    self._move_accepted()
                 self._answers.append(msg)
                 self._cond.notify_all()
 
     def _send(self, arbitration_id: int, data: bytes, command: int, what: str) -> None:
+        """Send a command and wait for its answer. Stop and velocity say where the base
+        should be, so an unanswered one is sent again, up to ``command_retries`` times; a
+        move is relative, and a CAN frame has no id to tell its repeat from a second move,
+        so an unanswered move stops the base and raises DeviceTimeoutError (the learn
+        that sent it fails saying so, design §12)."""
         self._check_ready()
+        retries = 0 if command == CMD_MOVE else self._settings.command_retries
         with self._write_lock:
-            with self._cond:
-                self._answers.clear()
-            try:
-                assert self._bus is not None  # _check_ready passed
-                self._bus.send(can.Message(arbitration_id=arbitration_id, data=data,
-                                           is_extended_id=False), timeout=0.2)
-            except can.CanError as e:
-                raise DeviceIOError(f"CAN {self._device}: cannot send {what}: {e}") from e
-            end = time.monotonic() + self._command_timeout_s
-            with self._cond:
-                while not any(a.command == command for a in self._answers):
-                    left = end - time.monotonic()
-                    if left <= 0:
-                        self.counters["command_timeouts"] += 1
-                        raise DeviceTimeoutError(f"CAN {self._device}: no answer to {what} "
-                                                 f"within {self._command_timeout_s:.2f} s")
-                    self._cond.wait(left)
-                answer = next(a for a in self._answers if a.command == command)
+            for attempt in range(retries + 1):
+                if attempt:
+                    self.counters["command_resends"] += 1
+                    log.warning("CAN %s: no answer to %s within %.2f s: sent again",
+                                self._device, what, self._command_timeout_s)
+                answer = self._send_once(arbitration_id, data, command, what)
+                if answer is not None:
+                    break
+            else:
+                self.counters["command_timeouts"] += 1
+                if command == CMD_MOVE:
+                    self._stop_quietly()
+                raise DeviceTimeoutError(
+                    f"CAN {self._device}: no answer to {what} within "
+                    f"{self._command_timeout_s:.2f} s"
+                    + (", not sent again (a repeated move could be driven twice); the base "
+                       "was stopped" if command == CMD_MOVE else f", sent {retries + 1} times"))
         if answer.result != 0:
             raise self._rejected(what, NAK_REASONS.get(answer.result, str(answer.result)))
         self.counters["acks"] += 1
+
+    def _send_once(self, arbitration_id: int, data: bytes, command: int, what: str
+                   ) -> CanAnswer | None:
+        with self._cond:
+            self._answers.clear()
+        try:
+            assert self._bus is not None  # _check_ready passed
+            self._bus.send(can.Message(arbitration_id=arbitration_id, data=data,
+                                       is_extended_id=False), timeout=0.2)
+        except can.CanError as e:
+            raise DeviceIOError(f"CAN {self._device}: cannot send {what}: {e}") from e
+        end = time.monotonic() + self._command_timeout_s
+        with self._cond:
+            while not any(a.command == command for a in self._answers):
+                left = end - time.monotonic()
+                if left <= 0:
+                    return None
+                self._cond.wait(left)
+            return next(a for a in self._answers if a.command == command)
+
+    def _stop_quietly(self) -> None:
+        """After a move that went unanswered: stop the base, whatever it made of it."""
+        for _ in range(self._settings.command_retries + 1):
+            try:
+                if self._send_once(self._ids.stop, b"", CMD_STOP, "stop") is not None:
+                    return
+            except DeviceIOError as e:
+                log.error("CAN %s: could not stop the base: %s", self._device, e)
+                return
 
     def move_relative(self, dx: float, dy: float, dyaw: float, speed: float) -> None:
         try:

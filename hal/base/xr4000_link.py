@@ -8,6 +8,7 @@ blocking at most ~50 ms) and ``_command`` (send one command, wait for its answer
 from __future__ import annotations
 
 import collections
+import dataclasses
 import logging
 import threading
 import time
@@ -172,6 +173,13 @@ class Xr4000Link:
 
     def _answer(self, msg: object) -> None:
         """A command answer (transport-specific type)."""
+
+    def _move_accepted(self) -> None:
+        """The controller answered a move: it is under way from here. Set on the reader
+        thread, in the order of the wire, so the status the controller sent before it
+        took the move (move_done from the last leg) is never read as this move's end; a
+        status sent after the answer says what the move does next."""
+        self._status = dataclasses.replace(self._status, moving=True, move_done=False)
 
     # -------------------------------------------------------- commands
     def _check_ready(self) -> None:

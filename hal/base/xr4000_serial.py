@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 import time
@@ -24,6 +25,8 @@ from hal.base.xr4000_protocol import (
 )
 from kernel.errors import DeviceInitError, DeviceIOError, DeviceTimeoutError
 
+log = logging.getLogger(__name__)
+
 
 class Xr4000SerialBase(Xr4000Link):
     backend = "xr4000-serial"
@@ -37,6 +40,7 @@ class Xr4000SerialBase(Xr4000Link):
         self._parser = SerialLineParser()
         self._write_lock = threading.Lock()
         self._answers: dict[int, AckMsg | NakMsg] = {}
+        self._moves: set[int] = set()  # ids of moves not yet answered
         self._next_id = 1
 
     def _connect(self) -> None:
@@ -69,39 +73,66 @@ class Xr4000SerialBase(Xr4000Link):
     def _answer(self, msg: object) -> None:
         if isinstance(msg, AckMsg | NakMsg):
             with self._cond:
+                if isinstance(msg, AckMsg) and msg.id in self._moves:
+                    self._moves.discard(msg.id)
+                    self._move_accepted()
                 self._answers[msg.id] = msg
                 self._cond.notify_all()
 
-    def _send(self, make: Any, what: str) -> None:
+    def _send(self, make: Any, what: str, move: bool = False) -> None:
+        """Send a command and wait for its answer; unanswered within the command timeout
+        it is sent again with the same id, up to ``command_retries`` times (the
+        controller answers a repeated id again without executing it twice, design §12),
+        then DeviceTimeoutError."""
         self._check_ready()
         with self._write_lock:
             cid = self._next_id
             self._next_id = self._next_id % 1_000_000 + 1
-            msg: Message = make(cid)
-            try:
-                assert self._port is not None  # _check_ready passed
-                self._port.write(encode_message(msg))
-            except (serial.SerialException, OSError) as e:
-                raise DeviceIOError(f"serial port {self._settings.port}: cannot send: {e}") from e
+        msg: Message = make(cid)
+        if move:
+            with self._cond:
+                self._moves.add(cid)
+        for attempt in range(self._settings.command_retries + 1):
+            if attempt:
+                self.counters["command_resends"] += 1
+                log.warning("%s: no answer to %s (id %d) within %.2f s: sent again",
+                            self._settings.port, what, cid, self._command_timeout_s)
+            with self._write_lock:
+                try:
+                    assert self._port is not None  # _check_ready passed
+                    self._port.write(encode_message(msg))
+                except (serial.SerialException, OSError) as e:
+                    raise DeviceIOError(f"serial port {self._settings.port}: cannot send: "
+                                        f"{e}") from e
+            answer = self._await_answer(cid)
+            if answer is not None:
+                break
+        else:
+            with self._cond:
+                self._moves.discard(cid)
+            self.counters["command_timeouts"] += 1
+            raise DeviceTimeoutError(
+                f"{self._settings.port}: no ACK/NAK for {what} (id {cid}) within "
+                f"{self._command_timeout_s:.2f} s, sent {self._settings.command_retries + 1} "
+                "times")
+        if isinstance(answer, NakMsg):
+            raise self._rejected(what, answer.reason)
+        self.counters["acks"] += 1
+
+    def _await_answer(self, cid: int) -> AckMsg | NakMsg | None:
         end = time.monotonic() + self._command_timeout_s
         with self._cond:
             while cid not in self._answers:
                 left = end - time.monotonic()
                 if left <= 0:
-                    self.counters["command_timeouts"] += 1
-                    raise DeviceTimeoutError(
-                        f"{self._settings.port}: no ACK/NAK for {what} (id {cid}) within "
-                        f"{self._command_timeout_s:.2f} s")
+                    return None
                 self._cond.wait(left)
-            answer = self._answers.pop(cid)
-        if isinstance(answer, NakMsg):
-            raise self._rejected(what, answer.reason)
-        self.counters["acks"] += 1
+            return self._answers.pop(cid)
 
     def move_relative(self, dx: float, dy: float, dyaw: float, speed: float) -> None:
         self._send(lambda i: MovCmd(i, round(dx * 1000), round(dy * 1000),
                                     round(dyaw * 1000), max(1, round(speed * 1000))),
-                   f"move ({dx:.3f}, {dy:.3f}, {math.degrees(dyaw):.1f} deg)")
+                   f"move ({dx:.3f}, {dy:.3f}, {math.degrees(dyaw):.1f} deg)", move=True)
 
     def velocity(self, vx: float, vy: float, w: float) -> None:
         self._send(lambda i: VelCmd(i, round(vx * 1000), round(vy * 1000), round(w * 1000)),

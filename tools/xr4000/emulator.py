@@ -42,6 +42,10 @@ from tools.xr4000.transport import CanSide, SerialSide
 
 log = logging.getLogger(__name__)
 
+# Serial commands are answered by id: the last this many answers are kept, so a command
+# the link sends again (its answer lost) is answered again and not executed twice.
+ANSWERS_KEPT = 64
+
 Sample = tuple[int, int, int, int, int]  # seq, t_ms, x_mm, y_mm, yaw_mrad
 
 
@@ -127,6 +131,8 @@ class Emulator:
         self.sent: list[Sample] = []  # odometry as put on the wire (before faults)
         self._truth = open(truth_out, "w") if truth_out else None  # noqa: SIM115
         self._status_seq = 0
+        self._answered: dict[int, AckMsg | NakMsg] = {}  # serial: the last answers, by id
+        self._answers_made = 0
         self._last_flags = -1
         self._last_status = 0.0
         self._t0 = time.monotonic()
@@ -204,15 +210,33 @@ class Emulator:
     def _handle_commands(self, t: float) -> None:
         if isinstance(self.side, SerialSide):
             for cmd in self.side.commands():
-                reason = self._execute(cmd)
-                answer = AckMsg(cmd.id) if reason is None else NakMsg(cmd.id, reason)
-                self.side.write(encode_message(answer))  # answers are never faulted
+                answer = self._answered.get(cmd.id)
+                if answer is None:  # a repeated id is answered again, not executed again
+                    reason = self._execute(cmd)
+                    answer = AckMsg(cmd.id) if reason is None else NakMsg(cmd.id, reason)
+                    self._answered[cmd.id] = answer
+                    while len(self._answered) > ANSWERS_KEPT:
+                        del self._answered[next(iter(self._answered))]
+                else:
+                    self.counts["repeated_commands"] += 1
+                if not self._answer_dropped():
+                    self.side.write(encode_message(answer))
         else:
             for kind, data in self.side.commands():
                 reason = self._execute_can(kind, data)
                 self.side.counter += 1
                 code = 0 if reason is None else {"cannot-move": 4, "invalid": 3}.get(reason, 2)
-                self.side.send(self.side.ids.answer, can_answer(self.side.counter, kind, code))
+                if not self._answer_dropped():
+                    self.side.send(self.side.ids.answer,
+                                   can_answer(self.side.counter, kind, code))
+
+    def _answer_dropped(self) -> bool:
+        """The fault plan's ``drop_answers``: this answer (counted from 1) is not sent."""
+        self._answers_made += 1
+        if self._answers_made in self.faults.plan.drop_answers:
+            self.faults.injected["dropped_answers"] += 1
+            return True
+        return False
 
     def _execute(self, cmd: MovCmd | VelCmd | StpCmd) -> str | None:
         self.counts[type(cmd).__name__] += 1

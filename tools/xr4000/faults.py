@@ -18,6 +18,7 @@ class FaultPlan:
     error_frame_rate: float = 0.0  # CAN: an error frame sent
     seq_jump_at_s: tuple[float, ...] = ()  # the sequence counter jumps by 1000 at these times
     silences: tuple[tuple[float, float], ...] = ()  # (start_s, duration_s): nothing sent
+    drop_answers: tuple[int, ...] = ()  # these answers to commands (1 = the first) not sent
 
 
 @dataclass
