@@ -94,3 +94,22 @@ class TopologicalMap:
 
     def transition(self, from_id: int, to_id: int) -> Transition | None:
         return self._edges.get(from_id, {}).get(to_id)
+
+    def segments(self) -> dict[int, int]:
+        """Each place's *segment*: the connected part of the map it is in, named by its
+        lowest place id (design §6). A place learned after a loss in unmapped space
+        starts a segment of its own; a transition measured between two segments joins
+        them. Only the segment of the lowest id is embedded in the `map` frame."""
+        segment: dict[int, int] = {}
+        for start in sorted(self._places):
+            if start in segment:
+                continue
+            segment[start] = start
+            stack = [start]
+            while stack:
+                a = stack.pop()
+                for b in self._edges.get(a, {}):
+                    if b not in segment:
+                        segment[b] = start
+                        stack.append(b)
+        return segment

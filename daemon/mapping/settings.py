@@ -96,6 +96,11 @@ class AcquisitionSettings:
                                       "the robot's own this long after an operator's command")
     retry_after_s: float = setting(10.0, ge=0.0, le=3600.0, doc="after a learn of its own "
                                    "that stored nothing, wait this long before the next")
+    unmapped_after_frames: int = setting(30, ge=1, le=100_000, doc="relocalisation that has "
+                                         "found no known place in this many frames...")
+    unmapped_after_m: float = setting(0.3, ge=0.0, le=100.0, doc="...while the robot "
+                                      "travelled this far: unmapped space; a place is learned "
+                                      "there and starts a new segment (design §6)")
     sample_step_m: float = setting(0.05, gt=0.0, le=1.0, doc="the LRP is sampled every this "
                                    "far travelled (frames while stationary or only turning "
                                    "add nothing)")

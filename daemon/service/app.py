@@ -21,6 +21,7 @@ from daemon.config import PlacecellConfig
 from daemon.localisation.localiser import Belief, Localiser
 from daemon.mapping.place import Place
 from daemon.mapping.transition import Transition
+from daemon.mapping.unmapped import UnmappedWatch
 from daemon.service import api, zenoh_link
 from daemon.service.components import (
     LatestFrame,
@@ -93,6 +94,7 @@ class Daemon:
         self._job: LearnJob | None = None
         self._queryables: list[Any] = []
         self._acquire_after = 0.0  # monotonic s: no autonomous learning before
+        self._unmapped = UnmappedWatch(config.mapping.acquisition)
         # cmd/mode changes it until the daemon stops; a read-only map only localises.
         self.mode = config.mapping.mode if self.map_readonly_reason is None else "localisation"
         self._tracked: SavedPose | None = None  # the last pose tracked, to save
@@ -259,16 +261,33 @@ class Daemon:
             self.publish_event("background_measured", place=place_id,
                                background_lrp=round(background, 4))
         decision = belief.acquisition
-        if not acq.enabled or self._job is not None \
-                or not belief.odometry_ok or time.monotonic() < self._acquire_after:
-            if decision is not None:  # not now: acquisition watches on and asks again
+        localiser = self.processing.localiser
+        lost_in_unmapped_space = self._unmapped.observe(
+            belief.state in ("tracking", "uninitialised") or self._job is not None,
+            None if localiser is None else localiser.odometry.latest)
+        # Not now: acquisition watches on and asks again. Nor while the robot is lost:
+        # where it stands from the last place is unknown (it may have been carried off);
+        # the unmapped-space rule below learns there if the search finds nothing.
+        if not acq.enabled or self._job is not None or not belief.odometry_ok \
+                or time.monotonic() < self._acquire_after \
+                or (decision is not None and belief.state != "tracking"):
+            if decision is not None:
                 self._learning_not_started()
             return
+        why = "the first one" if decision is None else \
+            f"place {decision.place_id}'s background reached"
         if decision is None and self.mapper.place_count() > 0:
-            return  # the first place only on an empty map: a restart resumes, not re-learns
+            # The first place only on an empty map: a restart resumes, not re-learns.
+            # Searched long enough, as the robot moved, without finding a place: unmapped
+            # space. A place is learned here, a segment of its own: no odometry link to
+            # the last place (the robot may have been carried), none from an estimate.
+            if not lost_in_unmapped_space:
+                return
+            why = (f"unmapped space: no known place found in {self._unmapped.frames} "
+                   f"frames over {self._unmapped.travelled_m:.2f} m; a new segment")
+            self.mapper.odometry_restarted()
         if decision is not None:
             self.mapper.set_background(decision.place_id, decision.background_lrp)
-            localiser = self.processing.localiser
             if localiser is not None:
                 localiser.know_place(self.mapper.graph.place(decision.place_id))
             self.publish_event("background_reached", place=decision.place_id,
@@ -281,8 +300,8 @@ class Daemon:
 
         try:
             self._start_learning(api.LearnRequest(), log_reply, "autopilot")
-            log.info("learning a place on my own (%s)", "the first one" if decision is None
-                     else f"place {decision.place_id}'s background reached")
+            self._unmapped.reset()
+            log.info("learning a place on my own (%s)", why)
         except api.RequestError as e:
             log.warning("autonomous learning not started: %s", e)
             self._acquire_after = time.monotonic() + acq.retry_after_s
@@ -371,6 +390,8 @@ class Daemon:
         if outcome.place is not None:
             p = outcome.place
             added = self.mapper.graph.neighbours(p.id)
+            self._publish_segment_changes(p.id, outcome.segments_before,
+                                          {"place_learned": p.id})
             if localiser is not None:
                 localiser.place_learned(p, added)
                 for place in outcome.rebackgrounded:
@@ -387,6 +408,28 @@ class Daemon:
         else:
             self.publish_event("learning_ended", code=str(outcome.error),
                                message=outcome.message, started_by=job.started_by)
+
+    def _publish_segment_changes(self, new_place: int | None, before: dict[int, int],
+                                 by: dict[str, Any]) -> None:
+        """Events for what a change of the map did to its segments (design §6): a place
+        learned with no transition starts one; a transition between two joins them."""
+        after = dict(self.mapper.segment_of)
+        count = len(set(after.values()))
+        if new_place is not None and after.get(new_place) == new_place and before \
+                and list(after.values()).count(new_place) == 1:
+            self.publish_event("segment_started", place=new_place, segments=count,
+                               reason="learned with no transition to a known place: "
+                                      "unmapped space, or the robot's pose was unknown")
+        merged: dict[int, set[int]] = {}
+        for place, segment in before.items():
+            if place in after:
+                merged.setdefault(after[place], set()).add(segment)
+        for segment, parts in sorted(merged.items()):
+            if len(parts) > 1:
+                log.info("segments %s joined into segment %d (%d left)", sorted(parts),
+                         segment, count)
+                self.publish_event("segments_joined", segment=segment, joined=sorted(parts),
+                                   segments=count, by=by)
 
     def _job_odometry(self, samples: list[Any], base: Any) -> None:
         job = self._job
@@ -576,7 +619,10 @@ class Daemon:
             place = self.mapper.map_frame.get(belief.place_id)
             if place is not None:
                 in_map = place.compose(SE2.of(belief.pose_in_place))
-        self.publish("pose", zenoh_link.encode("placecell.pose", _pose_body(belief, in_map)))
+        segments = self.mapper.segment_of
+        self.publish("pose", zenoh_link.encode("placecell.pose", _pose_body(
+            belief, in_map, None if belief.place_id is None else segments.get(belief.place_id),
+            min(segments.values(), default=None))))
         if self._ros2 is not None and place is not None and in_map is not None \
                 and belief.state == "tracking" and belief.covariance is not None:
             self._publish_ros2(belief, place, in_map)
@@ -609,11 +655,14 @@ class Daemon:
             log.info("cycle %d -> %d measured; not stored in localisation mode",
                      transition.from_id, transition.to_id)
             return
+        before = dict(self.mapper.segment_of)
         try:
             self.mapper.add_transition(transition)
         except (PlacecellError, KeyError) as e:
             log.error("could not store the cycle's transition: %s", e)
             return
+        self._publish_segment_changes(None, before, {"from": transition.from_id,
+                                                     "to": transition.to_id})
         m = transition.T_from_to.mean
         self.publish_event("transition_added", source="cycle", x=round(m.x, 4),
                            y=round(m.y, 4), yaw=round(m.yaw, 5),
@@ -641,6 +690,7 @@ class Daemon:
             "belief": self._belief_summary(belief, now),
             "map": {"path": self.config.map.path, "places": self.mapper.place_count(),
                     "transitions": self.mapper.transition_count(),
+                    "segments": len(set(self.mapper.segment_of.values())),
                     "mode": self.mode, "writable": not self.map.readonly,
                     "readonly_reason": self.map_readonly_reason},
             "job": self._job_summary(),
@@ -810,13 +860,20 @@ def _try_reply(query: zenoh.Query, payload: bytes) -> None:
         log.debug("reply failed: %s", e)
 
 
-def _pose_body(belief: Belief, in_map: SE2 | None) -> dict[str, Any]:
+def _pose_body(belief: Belief, in_map: SE2 | None, segment: int | None,
+               map_segment: int | None) -> dict[str, Any]:
     """``pose`` (design §11): the estimate in the current place's frame, and composed
-    into the `map` frame (design §6) when the place is embedded in it."""
+    into the `map` frame (design §6) when the place is embedded in it; a place in a
+    segment not joined to the map frame's (``map_segment``) says so in the reason."""
     pose = belief.pose_in_place
-    return {"stamp_ns": belief.stamp_ns, "state": belief.state, "reason": belief.reason,
+    reason = belief.reason
+    if segment is not None and segment != map_segment:
+        reason += (f"; in segment {segment}, not joined to the map frame's (segment "
+                   f"{map_segment}): the pose is in its place's frame only")
+    return {"stamp_ns": belief.stamp_ns, "state": belief.state, "reason": reason,
             "place": None if belief.place_id is None else {
-                "id": belief.place_id, "label": belief.place_label},
+                "id": belief.place_id, "label": belief.place_label,
+                "segment": belief.place_id if segment is None else segment},
             "x": None if pose is None else round(pose[0], 5),
             "y": None if pose is None else round(pose[1], 5),
             "yaw": None if pose is None else round(pose[2], 6),

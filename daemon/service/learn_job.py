@@ -149,6 +149,8 @@ class LearnOutcome:
     # Places whose background in other places' views it changed (itself among them).
     rebackgrounded: list[Place] = field(default_factory=list)
     reference_stamp_ns: int = 0  # the odometry stamp at the place's reference pose
+    # Each place's segment before the place was stored (design §6): what it changed.
+    segments_before: dict[int, int] = field(default_factory=dict)
 
 
 class LearnJob:
@@ -233,14 +235,16 @@ class LearnJob:
             place = Place(tbl.result(), tbl.reference_panorama, label=self.label,
                           created_unix_s=time.time(),
                           local_space=self._profile(tbl.reference_panorama))
+            before = dict(self.mapper.segment_of)
             stored, transitions = self.mapper.add_place(place, self._links)
-            outcome = LearnOutcome(stored, None, "", reference_stamp_ns=tbl.start.stamp_ns)
+            outcome = LearnOutcome(stored, None, "", reference_stamp_ns=tbl.start.stamp_ns,
+                                   segments_before=before)
             self._reply("progress", {"phase": "lookalikes", "fraction": 1.0})
             try:
                 changed = self.mapper.measure_cross_backgrounds(stored.id)
                 pairs = self.mapper.learn_features(stored.id, tbl.views, self.localisation)
                 outcome = LearnOutcome(stored, None, "", [p.b_id for p in pairs], changed,
-                                       tbl.start.stamp_ns)
+                                       tbl.start.stamp_ns, before)
             except Exception:  # noqa: BLE001 - the place is stored; cues can be redone
                 log.exception("place %d: its backgrounds or look-alikes' features were not "
                               "found", stored.id)

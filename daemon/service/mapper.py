@@ -82,6 +82,8 @@ class Mapper:
         self.noise = noise
         self._lock = threading.RLock()
         self.graph: TopologicalMap = store.load()
+        # Each place's segment (design §6), replaced whole on every change of the map.
+        self.segment_of: dict[int, int] = self.graph.segments()
         self._fill_cues()
         # design §6: each place's pose in the `map` frame; empty until first optimised
         # (off the caller's thread: seconds on a map of a thousand places).
@@ -182,6 +184,7 @@ class Mapper:
                 self.graph.add_transition(t)
                 added.extend(t.both_ways())
             self._last_place, self._chain, self._pending = stored.id, self._pending, None
+            self.segment_of = self.graph.segments()
         self.reembed()
         return stored, added
 
@@ -302,6 +305,7 @@ class Mapper:
         with self._lock:
             self.store.add_transition(transition)
             self.graph.add_transition(transition)
+            self.segment_of = self.graph.segments()
         self.reembed()
 
     def drawn(self) -> tuple[dict[int, tuple[SE2, str]], list[tuple[int, int]]]:

@@ -133,6 +133,7 @@ class Emulator:
         self._status_seq = 0
         self._answered: dict[int, AckMsg | NakMsg] = {}  # serial: the last answers, by id
         self._answers_made = 0
+        self.lost_seqs: list[int] = []  # CAN: samples a dropped frame made unusable
         self._last_flags = -1
         self._last_status = 0.0
         self._t0 = time.monotonic()
@@ -196,6 +197,7 @@ class Emulator:
         f.injected["dropped_frames"] += int(drop_pos) + int(drop_head)
         if drop_pos or drop_head:
             f.injected["samples_lost"] += 1
+            self.lost_seqs.append(seq)
             if drop_pos != drop_head:
                 f.injected["samples_half_lost"] += 1
         if not drop_pos:
@@ -268,4 +270,5 @@ class Emulator:
         return "invalid"
 
     def report(self) -> dict[str, Any]:
-        return {"counts": dict(self.counts), "injected": dict(self.faults.injected)}
+        return {"counts": dict(self.counts), "injected": dict(self.faults.injected),
+                "lost_seqs": list(self.lost_seqs)}
