@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-$(shell cat pyproject.toml | sha1sum | cut -c1-12)
 CONFIG ?= config/placecell.toml
 
-.PHONY: run test lint typecheck pytest bench clean
+.PHONY: run test test-under-load lint typecheck pytest bench clean
 
 $(STAMP): pyproject.toml
 	@tools/setup-system.sh venv
@@ -21,6 +21,10 @@ run: $(STAMP)
 test: $(STAMP)
 	@tools/setup-system.sh test
 	$(MAKE) lint typecheck pytest
+
+# The suite with two busy-loop processes beside it, as on a robot's loaded computer.
+test-under-load: $(STAMP)
+	tools/under-load.sh -n 2 $(MAKE) test
 
 lint: $(STAMP)
 	$(BIN)/ruff check kernel daemon hal tools tests

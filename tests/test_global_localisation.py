@@ -108,6 +108,28 @@ def test_no_usable_landmark_is_no_evidence_of_a_loss() -> None:
     assert loss.observe(0.1) is True
 
 
+def test_travel_with_no_evidence_at_all_is_a_loss_of_its_own() -> None:
+    """Issue 31: odometry alone, far from the place (NaN output every frame), was
+    published ``tracking`` for ever, 11 m off after a kidnap. ``blind_m`` of travel with
+    NaN frames only is a loss; a frame with evidence starts the count again; standing
+    still adds nothing."""
+    nan = float("nan")
+    loss = LossDetector(LocalisationSettings(loss_frames=5, blind_m=1.0))
+    assert [loss.observe(nan, 0.3) for _ in range(3)] == [False] * 3  # 0.9 m
+    assert loss.observe(0.6, 0.3) is False and loss.blind_m == 0.0  # evidence: again
+    assert [loss.observe(nan, d) for d in (0.5, 0.0, 0.0, 0.45)] == [False] * 4
+    assert loss.observe(nan, 0.1) is True and "no evidence over 1.0 m" in loss.why
+    assert loss.observe(nan, 0.3) is False  # declared once
+    never = LossDetector(LocalisationSettings(blind_m=0.0))
+    assert not any(never.observe(nan, 1.0) for _ in range(100))
+
+
+def test_the_reason_of_a_loss_names_its_rule() -> None:
+    loss = LossDetector(LocalisationSettings(loss_output=0.15, loss_frames=2))
+    assert [loss.observe(v) for v in (0.1, 0.1)] == [False, True]
+    assert loss.why == "sensor output below 0.15 for 2 frames"
+
+
 def test_with_a_cue_the_active_set_is_searched_best_first_and_decides() -> None:
     s = LocalisationSettings(search_places_per_frame=5, cue_margin=0.05)
     search = PlaceSearch(s)

@@ -105,11 +105,18 @@ def test_kidnapped_into_unmapped_space_a_segment_is_learned_and_joined_back(
             started = seen("segment_started")
             assert started is not None and started["segments"] == 2
             new_place = started["place"]
-            assert wait_for(lambda: seen("segments_joined") is not None, 240), \
+            # Joined to the map's segment (1) by a segment started after the kidnap (on a
+            # loaded machine a second loss on the way back may start another first).
+            def joined_to_map() -> dict[str, Any] | None:
+                with lock:
+                    return next((e for e in events if e["event"] == "segments_joined"
+                                 and 1 in e["joined"] and max(e["joined"]) >= new_place),
+                                None)
+
+            assert wait_for(lambda: joined_to_map() is not None, 240), \
                 [e["event"] for e in events]
-            joined = seen("segments_joined")
-            assert joined is not None and joined["segments"] == 1
-            assert sorted(joined["joined"]) == [1, new_place]
+            joined = joined_to_map()
+            assert joined is not None and joined["segment"] == 1
 
             def in_map_frame() -> bool:
                 with lock:
@@ -121,8 +128,9 @@ def test_kidnapped_into_unmapped_space_a_segment_is_learned_and_joined_back(
             assert wait_for(in_map_frame, 60), poses[-1:]
             print(f"segment {new_place} started, joined; in the map frame "
                   f"{time.monotonic() - t0:.1f} s after the join")
-            # While the new segment stood apart, its poses said so.
-            apart = [p for p in poses if p["place"] and p["place"]["segment"] == new_place]
+            # While a new segment stood apart, its poses said so.
+            with lock:
+                apart = [p for p in poses if p["place"] and p["place"]["segment"] != 1]
             assert apart and all(p["map"] is None and "not joined" in p["reason"]
                                  for p in apart)
             learned = [e for e in events if e["event"] == "place_learned"]

@@ -66,12 +66,10 @@ class PlaceSearch:
         if not cue:
             self.active = None
             return
-        top = max(cue.values())
-        active = {p for p, c in cue.items() if c >= top - self.settings.cue_margin}
+        active = near_best(cue, self.settings.cue_margin)
         if local:
-            best = max(local.values())
-            active = {p for p in active
-                      if local.get(p, best) >= best - self.settings.local_space_margin}
+            matched = near_best(local, self.settings.local_space_margin)
+            active = {p for p in active if p not in local or p in matched}
         self.active = active | set(always)
 
     @property
@@ -144,24 +142,53 @@ class PlaceSearch:
         return best if best.lead > here.lead + margin else None
 
 
+def near_best(scores: dict[int, float], margin: float) -> set[int]:
+    """The places scoring within ``margin`` of the best: the active set's rule for the
+    cue and for the local space match alike (§9.4.1: B = 0.075 kept the true place in the
+    local space set on 98 % of frames)."""
+    top = max(scores.values())
+    return {p for p, score in scores.items() if score >= top - margin}
+
+
 class LossDetector:
     """Loss of tracking: the raw output below ``loss_output`` for ``loss_frames`` frames
-    in a row (§9.3.1)."""
+    in a row (§9.3.1); or no evidence at all — too few of the place's landmarks usable
+    from the estimate (NaN output) — over ``blind_m`` of odometry travel in a row: the
+    pose is then odometry alone, ever farther from the place, and would stay ``tracking``
+    however wrong (a robot carried off while on odometry was published tracking 11 m
+    off, issue 31). Measured in metres, not frames: passing between places on odometry
+    for a metre or two is what tracking does (the revisit check ends such a stretch)."""
 
     def __init__(self, settings: LocalisationSettings) -> None:
         self.settings = settings
         self.low_frames = 0
+        self.blind_m = 0.0  # odometry travel since the last frame with evidence
+        self.why = ""  # the reason of the last loss declared
 
     def reset(self) -> None:
         self.low_frames = 0
+        self.blind_m = 0.0
 
-    def observe(self, output: float) -> bool:
-        """True on the frame the loss is declared. NaN (no landmark usable from the
-        estimate: far from the place, on odometry) is no evidence and changes nothing."""
+    def observe(self, output: float, travelled_m: float = 0.0) -> bool:
+        """True on the frame the loss is declared (``why`` says which rule);
+        ``travelled_m``: the odometry travel since the last frame. NaN is no evidence
+        either way for the output rule; it counts towards the blind rule."""
+        s = self.settings
         if math.isnan(output):
+            was = self.blind_m
+            self.blind_m += travelled_m
+            if 0 < s.blind_m <= self.blind_m and was < s.blind_m:
+                self.why = (f"no evidence over {s.blind_m:.1f} m: fewer than "
+                            f"{s.evidence_landmarks} of the place's landmarks usable from "
+                            "the estimate (odometry alone)")
+                return True
             return False
-        self.low_frames = self.low_frames + 1 if output < self.settings.loss_output else 0
-        return self.low_frames == self.settings.loss_frames
+        self.blind_m = 0.0
+        self.low_frames = self.low_frames + 1 if output < s.loss_output else 0
+        if self.low_frames == s.loss_frames:
+            self.why = f"sensor output below {s.loss_output} for {s.loss_frames} frames"
+            return True
+        return False
 
     @property
     def suspicious(self) -> bool:

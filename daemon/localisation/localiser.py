@@ -331,7 +331,8 @@ class Localiser:
         timings["positioning"] = (time.perf_counter() - t1) * 1e3
         t2 = time.perf_counter()
         mode = self.mode
-        searched, event = self._supervise(prepare, grey, local, frame.stamp_ns)
+        searched, event = self._supervise(prepare, grey, local, frame.stamp_ns,
+                                          0.0 if motion is None else math.hypot(*motion[:2]))
         timings["search"] = (time.perf_counter() - t2) * 1e3
         t2 = time.perf_counter()
         scores: tuple[PlaceScore, ...] = ()
@@ -403,7 +404,7 @@ class Localiser:
 
     # ------------------------------------------------------------------ global (§9)
     def _supervise(self, prepare: Callable[[], PreparedPanorama], grey: np.ndarray,
-                   local: LocalResult | None, stamp_ns: int
+                   local: LocalResult | None, stamp_ns: int, travelled_m: float
                    ) -> tuple[list[PlaceScore], LocalisationEvent | None]:
         """Search, loss detection and recovery for this frame (module docstring): the
         places recognised by the search, and the event this frame brings, if any."""
@@ -429,7 +430,7 @@ class Localiser:
         if local is None or self.tracker is None:
             return [], None  # a tracker started this frame
         current = self.tracker.place.id
-        lost_now = self.loss.observe(local.support)
+        lost_now = self.loss.observe(local.support, travelled_m)
         self._mode_frames += 1
         scored: list[PlaceScore] = []
         if self.mode != "confirm" and (self.loss.suspicious or self.mode == "recover"):
@@ -446,10 +447,9 @@ class Localiser:
                 return scored, None
             self._episode = (stamp_ns, self._frames)
             s = self.settings
-            event = LocalisationEvent("lost", current, f"sensor output below "
-                                      f"{s.loss_output} for {s.loss_frames} frames"
-                                      if lost_now else f"another place led the search "
-                                      f"by {s.search_margin} for {s.led_frames} frames")
+            event = LocalisationEvent("lost", current, self.loss.why if lost_now else
+                                      f"another place led the search by "
+                                      f"{s.search_margin} for {s.led_frames} frames")
             self.lead_watch.reset()
             leader = self._leader(grey, current, places)
             if leader is not None:

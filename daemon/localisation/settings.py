@@ -111,6 +111,9 @@ class LocalisationSettings:
                                  "kidnapped) is below this counts towards a loss "
                                  "(§9.3.1)...")
     loss_frames: int = setting(5, ge=1, le=1000, doc="...and this many in a row are one")
+    blind_m: float = setting(2.0, ge=0.0, le=1000.0, doc="odometry travel with no "
+                             "evidence (fewer than evidence_landmarks usable from the "
+                             "estimate: odometry alone) that is a loss too; 0: never")
     recovery_local_sigma_m: float = setting(0.2, gt=0.0, le=5.0, doc="recovery step 1: "
                                             "particles redistributed this far around the "
                                             "estimate (§9.3.2)")

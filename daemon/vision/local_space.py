@@ -78,14 +78,6 @@ def match_many(h: np.ndarray, profiles: np.ndarray, max_value: float) -> np.ndar
     return np.asarray(1.0 - sad[:, 0].astype(np.float64) / (max_value * bins))
 
 
-def local_space_set(h: np.ndarray, profiles: np.ndarray, max_value: float,
-                    margin: float) -> np.ndarray:
-    """Indices of the profiles whose match is within ``margin`` of the best (§9.4.1:
-    B = 0.075 kept the true place in the set on 98 % of frames)."""
-    c = match_many(h, profiles, max_value)
-    return np.flatnonzero(c >= c.max() - margin)
-
-
 class LocalSpace:
     """Local space as the robot sees it (design §4): the floor model learned from the
     floor in front of it, the floor grid fed every frame, the grid's profile in metres.
