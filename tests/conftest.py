@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import shutil
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -41,3 +42,15 @@ def office_map(tmp_path_factory: pytest.TempPathFactory) -> OfficeMap:
         return dict(refs)
 
     return copy
+
+
+@contextlib.contextmanager
+def run_at(tmp_path: Path, office_map: OfficeMap, label: str
+           ) -> Iterator[tuple[Run, dict[str, SE2]]]:
+    """A lock-step run on a fresh copy of the office map (``office_map``), the robot at
+    place ``label``'s reference; with the places' true reference poses by label."""
+    refs = office_map(tmp_path / "map.db")
+    ref = refs[label]
+    with Run(lockstep_config(1, start_pose=(ref.x, ref.y, ref.yaw)),
+             map_path=tmp_path / "map.db") as run:
+        yield run, refs

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 
 from daemon.localisation.localiser import Belief
-from tests.conftest import OfficeMap
-from tools.eval.lockstep import Run, lockstep_config
+from tests.conftest import OfficeMap, run_at
+from tools.eval.lockstep import Run
 
 
 def _wrong(run: Run, belief: Belief) -> bool:
@@ -33,10 +33,7 @@ def _wrong(run: Run, belief: Belief) -> bool:
 @pytest.mark.timeout(600)
 def test_odometry_alone_is_a_loss_and_a_kidnap_is_never_tracked(
         tmp_path: Path, office_map: OfficeMap) -> None:
-    refs = office_map(tmp_path / "map.db")
-    c = refs["c"]
-    with Run(lockstep_config(1, start_pose=(c.x, c.y, c.yaw)),
-             map_path=tmp_path / "map.db") as run:
+    with run_at(tmp_path, office_map, "c") as (run, refs):
         run.references = {p.id: refs[p.label] for p in run.mapper.graph.places}
         run.restart_localiser()
         for _ in range(100):

@@ -54,3 +54,30 @@ def test_a_live_link_that_never_catches_up_ends_after_the_frame_timeout() -> Non
         odometry_at_frame(OdometryBuffer(), FRAME, reads, TblSettings(frame_timeout_s=0.1),
                           lambda: True)
     assert reads.calls > 1
+
+
+def test_a_frame_older_than_the_learns_odometry_is_passed_over() -> None:
+    """Under load a starved camera thread can deliver a frame taken before the learn's
+    first odometry sample: it is skipped, not a failed learn (2 of 5 learns failed
+    "no odometry at the frame's time" beside four busy loops)."""
+    from daemon.service.learning import frame_with_odometry
+
+    buffer = OdometryBuffer()
+    buffer.extend([_sample(FRAME.stamp_ns + 500_000_000), _sample(FRAME.stamp_ns + 900_000_000)])
+    later = Frame(FRAME.image, FRAME.stamp_ns + 700_000_000, 2)
+    frames = iter([FRAME, later])
+    frame, odo = frame_with_odometry(
+        lambda: next(frames),
+        lambda f: odometry_at_frame(buffer, f, Reads(late=None), TblSettings()),
+        TblSettings())
+    assert frame is later and odo.stamp_ns == later.stamp_ns
+
+
+def test_only_stale_frames_fail_the_learn_after_the_frame_timeout() -> None:
+    from daemon.service.learning import frame_with_odometry
+
+    buffer = OdometryBuffer()
+    buffer.extend([_sample(FRAME.stamp_ns + 500_000_000)])
+    with pytest.raises(LearningError, match="no odometry at the frames' time"):
+        frame_with_odometry(lambda: FRAME, lambda f: odometry_at_frame(
+            buffer, f, Reads(late=None), TblSettings()), TblSettings(frame_timeout_s=0.05))

@@ -13,8 +13,8 @@ import pytest
 
 from daemon.localisation.localiser import Localiser
 from daemon.mapping.settings import AcquisitionSettings
-from tests.conftest import OfficeMap
-from tools.eval.lockstep import Run, lockstep_config
+from tests.conftest import OfficeMap, run_at
+from tools.eval.lockstep import Run
 
 
 def _resumed_at_b(run: Run, acquisition: AcquisitionSettings) -> tuple[Localiser, dict]:
@@ -34,10 +34,7 @@ def _resumed_at_b(run: Run, acquisition: AcquisitionSettings) -> tuple[Localiser
 @pytest.mark.timeout(300)
 def test_a_resumed_localiser_watches_its_place_and_asks_for_none(
         tmp_path: Path, office_map: OfficeMap) -> None:
-    refs = office_map(tmp_path / "map.db")
-    b = refs["b"]
-    with Run(lockstep_config(1, start_pose=(b.x, b.y, b.yaw)),
-             map_path=tmp_path / "map.db") as run:
+    with run_at(tmp_path, office_map, "b") as (run, _):
         localiser, ids = _resumed_at_b(run, AcquisitionSettings(enabled=True))
         beliefs = [run.step()[1] for _ in range(30)]
     tracking = [i for i, bl in enumerate(beliefs) if bl.state == "tracking"]
@@ -51,10 +48,7 @@ def test_a_resumed_localiser_watches_its_place_and_asks_for_none(
 @pytest.mark.timeout(300)
 def test_a_decision_whose_learn_did_not_happen_is_asked_again(
         tmp_path: Path, office_map: OfficeMap) -> None:
-    refs = office_map(tmp_path / "map.db")
-    c = refs["c"]
-    with Run(lockstep_config(1, start_pose=(c.x, c.y, c.yaw)),
-             map_path=tmp_path / "map.db") as run:
+    with run_at(tmp_path, office_map, "c") as (run, _):
         # Past c into the corridor nobody mapped: c fades; nothing is known further on.
         localiser, ids = _resumed_at_b(run, AcquisitionSettings(enabled=True,
                                                                min_distance_m=0.5))

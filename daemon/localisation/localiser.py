@@ -138,6 +138,7 @@ class Localiser:
             and acquisition.enabled else None
         self._watched: tuple[int, PreparedTemplates] | None = None
         self._awaiting_place = False  # a decision was made: the new place comes next
+        self._learning = False  # a place is being learned (see learning())
         self._watched_learned = False  # learned where it began to be watched (its reference)
         self._watch_next: tuple[int, PreparedTemplates] | None = None  # from other threads
         self._known: dict[int, KnownPlace] = {}
@@ -202,6 +203,13 @@ class Localiser:
         self.know_place(place)
         self._watch_next = (place.id, self._known[place.id].templates)
 
+    def learning(self, driving: bool) -> None:
+        """A place is being learned (``driving``: the robot drives the Turn Back and Look
+        cross, away from the place it is tracked in) or no longer is: meanwhile travel
+        without evidence is no loss — the pose starts again in the new place. Safe to
+        call from another thread."""
+        self._learning = driving
+
     def learning_not_started(self) -> None:
         """The place acquisition asked for was not learned (refused, failed, aborted, or
         the daemon had a job already): acquisition watches the place the robot is
@@ -214,6 +222,7 @@ class Localiser:
         starts at its reference — Turn Back and Look ends where it began, to within the
         cross's own error (AFTER_LEARNING_SIGMA). Safe to call from another thread."""
         self.watch_place(place)
+        self._learning = False
         for t in transitions:
             self.know_transition(t)
         self.set_pose(place.id, (0.0, 0.0, 0.0), AFTER_LEARNING_SIGMA_M,
@@ -430,7 +439,7 @@ class Localiser:
         if local is None or self.tracker is None:
             return [], None  # a tracker started this frame
         current = self.tracker.place.id
-        lost_now = self.loss.observe(local.support, travelled_m)
+        lost_now = self.loss.observe(local.support, 0.0 if self._learning else travelled_m)
         self._mode_frames += 1
         scored: list[PlaceScore] = []
         if self.mode != "confirm" and (self.loss.suspicious or self.mode == "recover"):

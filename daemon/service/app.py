@@ -1,4 +1,8 @@
-"""The daemon: devices, the supervised loop, zenoh, and systemd integration (SPEC §11)."""
+"""The daemon: devices, the supervised loop, zenoh, and systemd integration (design §11).
+
+What it answers and publishes is built elsewhere: ``queries`` (a guarded handler per
+queryable, the answer for unserved keys), ``wire`` (the JSON bodies of pose, belief and
+place), ``map_file`` (the map opened for the mode), ``learn_job`` (a learn)."""
 
 from __future__ import annotations
 
@@ -19,10 +23,9 @@ import zenoh
 import daemon
 from daemon.config import PlacecellConfig
 from daemon.localisation.localiser import Belief, Localiser
-from daemon.mapping.place import Place
 from daemon.mapping.transition import Transition
 from daemon.mapping.unmapped import UnmappedWatch
-from daemon.service import api, zenoh_link
+from daemon.service import api, queries, wire, zenoh_link
 from daemon.service.components import (
     LatestFrame,
     OdometryInbox,
@@ -204,17 +207,17 @@ class Daemon:
                    ("map/place/**", self._answer_place))
         for leaf, handler in answers:
             self._queryables.append(s.declare_queryable(
-                zenoh_link.key(self.robot, leaf), _guarded(leaf, handler)))
+                zenoh_link.key(self.robot, leaf), queries.guarded(leaf, handler)))
         # Every other key under the robot's prefix is answered too, with what it asked
         # wrong, not left to the client's timeout (design §11).
         self._queryables.append(s.declare_queryable(
             zenoh_link.key(self.robot, "**"),
-            _unknown_key(self.robot, [leaf for leaf, _ in answers])))
+            queries.unknown_key(self.robot, [leaf for leaf, _ in answers])))
         log.info("zenoh session %s: listening on %s, connecting to %s, multicast scouting %s",
                  s.zid(), z.listen, z.connect, "on" if z.multicast_scouting else "off")
 
     def _answer_status(self, query: zenoh.Query) -> None:
-        api.parse(api.NoParameters, _payload(query), "status")
+        api.parse(api.NoParameters, queries.payload(query), "status")
         query.reply(query.key_expr, self.status_payload())
 
     # ------------------------------------------------------------------ learning
@@ -230,7 +233,7 @@ class Daemon:
                 query.drop()
 
         try:
-            request = api.parse(api.LearnRequest, _payload(query), "learn_place")
+            request = api.parse(api.LearnRequest, queries.payload(query), "learn_place")
             self._operator_acted()
             job = self._start_learning(request, reply, "operator")
         except api.RequestError as e:
@@ -353,6 +356,9 @@ class Daemon:
                            started_by=started_by)
             self._job = job
             job.start()
+        localiser = self.processing.localiser
+        if localiser is not None:
+            localiser.learning(True)
         return job
 
     def _preempt_autopilot(self) -> None:
@@ -385,6 +391,8 @@ class Daemon:
             self._acquire_after = max(self._acquire_after,  # do not retry at once
                                       time.monotonic() + acq.retry_after_s)
         localiser = self.processing.localiser
+        if localiser is not None:
+            localiser.learning(False)
         if outcome.place is None:
             self._learning_not_started()
         if outcome.place is not None:
@@ -443,7 +451,7 @@ class Daemon:
 
     def _answer_abort(self, query: zenoh.Query) -> None:
         received_ns = time.monotonic_ns()
-        api.parse(api.NoParameters, _payload(query), "abort")
+        api.parse(api.NoParameters, queries.payload(query), "abort")
         self._operator_acted()
         job = self._job
         if job is None:
@@ -460,7 +468,7 @@ class Daemon:
     # ------------------------------------------------------------------ pose
     def _answer_set_pose(self, query: zenoh.Query) -> None:
         """cmd/set_pose: track from a pose the operator gives (design §7)."""
-        request = api.parse(api.SetPoseRequest, _payload(query), "set_pose")
+        request = api.parse(api.SetPoseRequest, queries.payload(query), "set_pose")
         self._operator_acted()
         localiser = self.processing.localiser
         if localiser is None:
@@ -479,7 +487,7 @@ class Daemon:
 
     def _answer_relocalise(self, query: zenoh.Query) -> None:
         """cmd/relocalise: search the whole map for the robot (design §9)."""
-        api.parse(api.NoParameters, _payload(query), "relocalise")
+        api.parse(api.NoParameters, queries.payload(query), "relocalise")
         self._operator_acted()
         localiser = self.processing.localiser
         if localiser is None:
@@ -497,7 +505,7 @@ class Daemon:
     def _answer_mode(self, query: zenoh.Query) -> None:
         """cmd/mode: switch between mapping and localisation (design §11); refused while
         a place is being learned (abort it first)."""
-        request = api.parse(api.ModeRequest, _payload(query), "mode")
+        request = api.parse(api.ModeRequest, queries.payload(query), "mode")
         if request.mode == "mapping" and self.map_readonly_reason is not None:
             raise api.RequestError(api.ErrorCode.REFUSED, "mapping needs a writable map: "
                                    f"{self.map_readonly_reason}", api.Reason.MAP_READONLY)
@@ -516,12 +524,13 @@ class Daemon:
     # ------------------------------------------------------------------ map
     def _answer_place(self, query: zenoh.Query) -> None:
         """map/place/<id> (metadata) and map/place/<id>/panorama (PNG, landmarks drawn)."""
-        api.parse(api.NoParameters, _payload(query), "map/place")
+        api.parse(api.NoParameters, queries.payload(query), "map/place")
         prefix = zenoh_link.key(self.robot, "map/place/")
         rest = str(query.key_expr).removeprefix(prefix).split("/")
         if len(rest) not in (1, 2) or (len(rest) == 2 and rest[1] != "panorama"):
-            raise api.RequestError(api.ErrorCode.BAD_REQUEST, f"{_shorter(query.key_expr)}: "
-                                   f"ask for {prefix}<id> or {prefix}<id>/panorama")
+            raise api.RequestError(api.ErrorCode.BAD_REQUEST,
+                                   f"{queries.shorter(query.key_expr)}: ask for "
+                                   f"{prefix}<id> or {prefix}<id>/panorama")
         place_id = api.place_id(rest[0], "map/place")
         if not self.mapper.has_place(place_id):
             raise api.RequestError(api.ErrorCode.NOT_FOUND, f"place {place_id} is not in "
@@ -536,18 +545,18 @@ class Daemon:
             query.reply(query.key_expr, png.tobytes(), encoding=zenoh.Encoding.IMAGE_PNG)
             return
         query.reply(query.key_expr, zenoh_link.encode(
-            "placecell.place", _place_body(self.mapper.place(place_id),
+            "placecell.place", wire.place_body(self.mapper.place(place_id),
                                            self.mapper.neighbours(place_id))))
 
     def _answer_places(self, query: zenoh.Query) -> None:
-        api.parse(api.NoParameters, _payload(query), "map/places")
+        api.parse(api.NoParameters, queries.payload(query), "map/places")
         places = [{"id": p.id, "label": p.label, "created_unix_s": p.created_unix_s,
                    "landmarks": p.landmark_count, "background_lrp": p.background_lrp}
                   for p in self.mapper.summaries()]
         query.reply(query.key_expr, zenoh_link.encode("placecell.places", {"places": places}))
 
     def _answer_transitions(self, query: zenoh.Query) -> None:
-        api.parse(api.NoParameters, _payload(query), "map/transitions")
+        api.parse(api.NoParameters, queries.payload(query), "map/transitions")
         out = []
         for t in self.mapper.transitions():
             m = t.T_from_to.mean
@@ -613,14 +622,14 @@ class Daemon:
                 and belief.pose_in_place is not None and belief.covariance is not None:
             self._tracked = SavedPose(belief.place_id, belief.pose_in_place,
                                       np.array(belief.covariance).reshape(3, 3), time.time())
-        body = _belief_body(belief)
+        body = wire.belief_body(belief)
         in_map = place = None
         if belief.place_id is not None and belief.pose_in_place is not None:
             place = self.mapper.map_frame.get(belief.place_id)
             if place is not None:
                 in_map = place.compose(SE2.of(belief.pose_in_place))
         segments = self.mapper.segment_of
-        self.publish("pose", zenoh_link.encode("placecell.pose", _pose_body(
+        self.publish("pose", zenoh_link.encode("placecell.pose", wire.pose_body(
             belief, in_map, None if belief.place_id is None else segments.get(belief.place_id),
             min(segments.values(), default=None))))
         if self._ros2 is not None and place is not None and in_map is not None \
@@ -803,118 +812,6 @@ class Daemon:
         self.notifier.close()
         log.info("stopped")
         return 0
-
-
-def _payload(query: zenoh.Query) -> bytes:
-    return b"" if query.payload is None else query.payload.to_bytes()
-
-
-def _guarded(leaf: str, handler: Any) -> Any:
-    """A queryable callback that answers every failure with an error reply: nothing a
-    client sends can raise out of it (design §11)."""
-    def answer(query: zenoh.Query) -> None:
-        try:
-            handler(query)
-        except api.RequestError as e:
-            _try_reply(query, api.error(e.code, str(e), e.reason))
-        except Exception as e:  # noqa: BLE001 - a client must never crash the daemon
-            log.warning("%s query failed: %s", leaf, e)
-            _try_reply(query, api.error(api.ErrorCode.FAILED, f"{type(e).__name__}: {e}"))
-
-    return answer
-
-
-def _shorter(key: Any, limit: int = 120) -> str:
-    text = str(key)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-# Keys the daemon publishes: asked by query, they are answered with where to subscribe.
-PUBLISHED = ("pose", "belief", "events", "alive")
-
-
-def _unknown_key(robot: str, answered: list[str]) -> Any:
-    """The queryable on ``placecell/<robot>/**``: silent where a query reaches a key that
-    another queryable answers (that one replies), a ``bad_request`` naming the key and
-    the keys there are otherwise."""
-    served = [zenoh.KeyExpr(zenoh_link.key(robot, leaf)) for leaf in answered]
-    prefix = zenoh_link.key(robot, "")
-
-    def answer(query: zenoh.Query) -> None:
-        if any(k.intersects(query.key_expr) for k in served):
-            return
-        leaf = str(query.key_expr).removeprefix(prefix)
-        hint = (f"{leaf} is published, not answered: subscribe to it"
-                if leaf in PUBLISHED else
-                f"no such key; the daemon answers {', '.join(answered)} under {prefix}")
-        _try_reply(query, api.error(api.ErrorCode.BAD_REQUEST,
-                                    f"{_shorter(query.key_expr)}: {hint}"))
-
-    return answer
-
-
-def _try_reply(query: zenoh.Query, payload: bytes) -> None:
-    try:
-        query.reply(query.key_expr, payload)
-    except Exception as e:  # noqa: BLE001 - the client may have gone
-        log.debug("reply failed: %s", e)
-
-
-def _pose_body(belief: Belief, in_map: SE2 | None, segment: int | None,
-               map_segment: int | None) -> dict[str, Any]:
-    """``pose`` (design §11): the estimate in the current place's frame, and composed
-    into the `map` frame (design §6) when the place is embedded in it; a place in a
-    segment not joined to the map frame's (``map_segment``) says so in the reason."""
-    pose = belief.pose_in_place
-    reason = belief.reason
-    if segment is not None and segment != map_segment:
-        reason += (f"; in segment {segment}, not joined to the map frame's (segment "
-                   f"{map_segment}): the pose is in its place's frame only")
-    return {"stamp_ns": belief.stamp_ns, "state": belief.state, "reason": reason,
-            "place": None if belief.place_id is None else {
-                "id": belief.place_id, "label": belief.place_label,
-                "segment": belief.place_id if segment is None else segment},
-            "x": None if pose is None else round(pose[0], 5),
-            "y": None if pose is None else round(pose[1], 5),
-            "yaw": None if pose is None else round(pose[2], 6),
-            "covariance": None if belief.covariance is None else [
-                float(f"{v:.6g}") for v in belief.covariance],
-            "confidence": round(belief.confidence, 4),
-            "map": None if in_map is None else {
-                "x": round(in_map.x, 5), "y": round(in_map.y, 5), "yaw": round(in_map.yaw, 6)}}
-
-
-def _belief_body(belief: Belief) -> dict[str, Any]:
-    return {"stamp_ns": belief.stamp_ns, "state": belief.state, "reason": belief.reason,
-            "odometry_ok": belief.odometry_ok, "place_id": belief.place_id,
-            "pose_in_place": belief.pose_in_place, "confidence": round(belief.confidence, 4),
-            "particles": belief.particles, "switched_from": belief.switched_from,
-            "scores": [{"place": sc.place_id, "lrp": round(sc.lrp, 4),
-                        "lead": round(sc.lead, 4)} for sc in belief.scores],
-            "timings_ms": belief.timings_ms,
-            "recent_place": None if belief.recent_place is None else {
-                "id": belief.recent_place, "lrp": None if belief.recent_place_lrp is None
-                else round(belief.recent_place_lrp, 4)}}
-
-
-def _place_body(place: Place, out: list[Transition]) -> dict[str, Any]:
-    """``map/place/<id>``: what the map holds of a place, without the images."""
-    def finite(v: float) -> float | None:
-        return round(float(v), 6) if math.isfinite(v) else None
-
-    return {"id": place.id, "label": place.label, "created_unix_s": place.created_unix_s,
-            "background_lrp": place.background_lrp,
-            "background_estimate": place.background_estimate,
-            "background_cross": place.background_cross,
-            "landmarks": [{"row": lm.row, "col": lm.col, "bearing": round(lm.bearing, 6),
-                           "depth_m": finite(lm.depth),
-                           "depth_sigma_m": finite(math.sqrt(lm.covariance[0, 0]))
-                           if lm.covariance[0, 0] >= 0 else None,
-                           "score": round(lm.score, 5)} for lm in place.landmarks.landmarks],
-            "transitions": [{"to": t.to_id, "x": round(t.T_from_to.mean.x, 5),
-                             "y": round(t.T_from_to.mean.y, 5),
-                             "yaw": round(t.T_from_to.mean.yaw, 6), "source": t.source}
-                            for t in out]}
 
 
 def _zenoh_version() -> str:

@@ -26,7 +26,7 @@ from daemon.mapping.place import Place
 from daemon.mapping.settings import TblSettings
 from daemon.mapping.tbl import Progress
 from daemon.service.api import ErrorCode
-from daemon.service.learning import drive_tbl, odometry_at_frame
+from daemon.service.learning import drive_tbl, frame_with_odometry, odometry_at_frame
 from daemon.service.mapper import Link, Mapper, Seen
 from daemon.vision.unwarp import Unwarper
 from hal.base.base import BaseInfo, BaseStatus
@@ -100,13 +100,15 @@ class FeedSensors:
         self._link_up = link_up
 
     def frame(self) -> tuple[Frame, Odometry]:
+        return frame_with_odometry(self._next_frame, lambda f: odometry_at_frame(
+            self.buffer, f, lambda: self.feed.odometry(self._odometry_timeout_s),
+            self.settings, self._link_up), self.settings)
+
+    def _next_frame(self) -> Frame:
         try:
-            frame = self.feed.next_frame(self.settings.frame_timeout_s)
+            return self.feed.next_frame(self.settings.frame_timeout_s)
         except DeviceTimeoutError as e:
             raise LearningError(f"frames stopped arriving during learning: {e}") from e
-        return frame, odometry_at_frame(
-            self.buffer, frame, lambda: self.feed.odometry(self._odometry_timeout_s),
-            self.settings, self._link_up)
 
 
 class BaseCommands:

@@ -56,10 +56,11 @@ class Mover(Protocol):
 
 def odometry_at_frame(buffer: OdometryBuffer, frame: Frame,
                       read: Callable[[], list[Odometry]], settings: TblSettings,
-                      link_up: Callable[[], bool] = lambda: True) -> Odometry:
+                      link_up: Callable[[], bool] = lambda: True) -> Odometry | None:
     """The odometry at ``frame``'s stamp, reading more samples (``read``, which waits the
     base's configured read timeout and raises DeviceTimeoutError when none came) until
-    the buffer reaches just past it.
+    the buffer reaches just past it. None: the frame was taken before the first sample
+    this learn read (a frame delivered late by a starved camera thread): skip it.
 
     A late sample is told from a dead link: while ``link_up`` says the base is running,
     samples slowed by a busy CPU are waited for, up to ``frame_timeout_s`` in all; a link
@@ -78,10 +79,22 @@ def odometry_at_frame(buffer: OdometryBuffer, frame: Frame,
             if time.monotonic() >= deadline:
                 raise LearningError(f"odometry fell {settings.frame_timeout_s:.1f} s behind "
                                     f"the frames during learning ({e})") from e
-    odo = buffer.at(frame.stamp_ns, max_extrapolation_ns=100_000_000)
-    if odo is None:
-        raise LearningError("no odometry at the frame's time: cannot learn")
-    return odo
+    return buffer.at(frame.stamp_ns, max_extrapolation_ns=100_000_000)
+
+
+def frame_with_odometry(next_frame: Callable[[], Frame],
+                        odometry: Callable[[Frame], Odometry | None],
+                        settings: TblSettings) -> tuple[Frame, Odometry]:
+    """The next frame that odometry covers, with the odometry at its stamp; frames older
+    than the learn's first odometry sample are passed over, for ``frame_timeout_s``."""
+    deadline = time.monotonic() + settings.frame_timeout_s
+    while True:
+        frame = next_frame()
+        odo = odometry(frame)
+        if odo is not None:
+            return frame, odo
+        if time.monotonic() >= deadline:
+            raise LearningError("no odometry at the frames' time: cannot learn")
 
 
 class DeviceSensors:
@@ -98,11 +111,17 @@ class DeviceSensors:
         self._on_odometry = on_odometry  # every sample read is also handed here
 
     def frame(self) -> tuple[Frame, Odometry]:
+        return frame_with_odometry(
+            self._next_frame,
+            lambda f: odometry_at_frame(self.odometry, f, self._read, self.settings),
+            self.settings)
+
+    def _next_frame(self) -> Frame:
         try:
             frame: Frame = self.camera.read(self.settings.frame_timeout_s)
         except DeviceTimeoutError as e:
             raise LearningError(f"frames stopped arriving during learning: {e}") from e
-        return frame, odometry_at_frame(self.odometry, frame, self._read, self.settings)
+        return frame
 
     def _read(self) -> list[Odometry]:
         samples: list[Odometry] = self.base.read(self.odometry_timeout_s)

@@ -158,8 +158,12 @@ class Run:
             links.extend(self.mapper.begin_place(odo, self.localiser.reliable_estimate()))
             truth.append(self.robot.true_pose())
 
-        tbl = drive_tbl(self.sensors, self.base, self.localiser.unwarper, self.cfg.tbl,
-                        on_start=start)
+        self.localiser.learning(True)  # as the daemon does while a learn job runs
+        try:
+            tbl = drive_tbl(self.sensors, self.base, self.localiser.unwarper, self.cfg.tbl,
+                            on_start=start)
+        finally:
+            self.localiser.learning(False)
         stored, added = self.mapper.add_place(
             Place(tbl.result(), tbl.reference_panorama, label=label,
                   local_space=self.localiser.place_profile(tbl.reference_panorama)), links)

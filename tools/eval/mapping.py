@@ -213,10 +213,12 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
                 localiser.know_place(mapper.graph.place(decision.place_id))
             links: list[Link] = []
             start_ns = frame.stamp_ns
+            localiser.learning(True)  # as the daemon does while a learn job runs
             try:
                 tbl = drive_tbl(sensors, base, localiser.unwarper, cfg.tbl,
                                 on_start=functools.partial(_begin, mapper, links, localiser))
             except LearningError:
+                localiser.learning(False)
                 mapper.cancel_place()
                 failures += 1
                 retry_at_m = path_m + RETRY_AFTER_M
