@@ -250,8 +250,10 @@ class Daemon:
 
     # ------------------------------------------------------------ autonomous acquisition
     def _maybe_acquire(self, belief: Belief) -> None:
-        """Learn a place on the robot's own (design §6): the first one as soon as the robot
-        can learn, then each time the last place's LRP has settled at its background."""
+        """Learn a place on the robot's own (design §6): the first one on an empty map as
+        soon as the robot can learn, then each time the watched place's LRP has settled at
+        its background while the robot is tracked, and in unmapped space after a loss (a
+        new segment)."""
         acq = self.config.mapping.acquisition
         if self.mode != "mapping":
             return  # the map is read-only
