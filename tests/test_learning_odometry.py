@@ -66,10 +66,8 @@ def test_a_frame_older_than_the_learns_odometry_is_passed_over() -> None:
     buffer.extend([_sample(FRAME.stamp_ns + 500_000_000), _sample(FRAME.stamp_ns + 900_000_000)])
     later = Frame(FRAME.image, FRAME.stamp_ns + 700_000_000, 2)
     frames = iter([FRAME, later])
-    frame, odo = frame_with_odometry(
-        lambda: next(frames),
-        lambda f: odometry_at_frame(buffer, f, Reads(late=None), TblSettings()),
-        TblSettings())
+    frame, odo = frame_with_odometry(lambda _: next(frames), buffer, Reads(late=None),
+                                     TblSettings())
     assert frame is later and odo.stamp_ns == later.stamp_ns
 
 
@@ -79,5 +77,15 @@ def test_only_stale_frames_fail_the_learn_after_the_frame_timeout() -> None:
     buffer = OdometryBuffer()
     buffer.extend([_sample(FRAME.stamp_ns + 500_000_000)])
     with pytest.raises(LearningError, match="no odometry at the frames' time"):
-        frame_with_odometry(lambda: FRAME, lambda f: odometry_at_frame(
-            buffer, f, Reads(late=None), TblSettings()), TblSettings(frame_timeout_s=0.05))
+        frame_with_odometry(lambda _: FRAME, buffer, Reads(late=None),
+                            TblSettings(frame_timeout_s=0.05))
+
+
+def test_frames_that_stop_end_the_learn_saying_so() -> None:
+    from daemon.service.learning import frame_with_odometry
+
+    def stalled(timeout_s: float) -> Frame:
+        raise DeviceTimeoutError(f"no camera frame within {timeout_s:.1f} s")
+
+    with pytest.raises(LearningError, match="frames stopped arriving during learning"):
+        frame_with_odometry(stalled, OdometryBuffer(), Reads(late=0), TblSettings())

@@ -222,7 +222,6 @@ class Localiser:
         starts at its reference — Turn Back and Look ends where it began, to within the
         cross's own error (AFTER_LEARNING_SIGMA). Safe to call from another thread."""
         self.watch_place(place)
-        self._learning = False
         for t in transitions:
             self.know_transition(t)
         self.set_pose(place.id, (0.0, 0.0, 0.0), AFTER_LEARNING_SIGMA_M,

@@ -154,8 +154,15 @@ def result(**fields: Any) -> bytes:
     return zenoh_link.encode(REPLY_SCHEMA, {"kind": "result", **fields})
 
 
-def error(code: ErrorCode, message: str, reason: Reason | None = None) -> bytes:
-    body = {"kind": "error", "code": str(code), "message": message}
+def error_fields(code: ErrorCode, message: str, reason: Reason | None = None
+                 ) -> dict[str, str]:
+    """An error reply's fields after its ``kind``: the code, the message, the reason."""
+    fields = {"code": str(code), "message": message}
     if reason is not None:
-        body["reason"] = str(reason)
-    return zenoh_link.encode(REPLY_SCHEMA, body)
+        fields["reason"] = str(reason)
+    return fields
+
+
+def error(code: ErrorCode, message: str, reason: Reason | None = None) -> bytes:
+    return zenoh_link.encode(REPLY_SCHEMA, {"kind": "error",
+                                            **error_fields(code, message, reason)})

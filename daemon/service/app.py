@@ -237,8 +237,7 @@ class Daemon:
             self._operator_acted()
             job = self._start_learning(request, reply, "operator")
         except api.RequestError as e:
-            reply("error", {"code": str(e.code), "message": str(e),
-                            **({} if e.reason is None else {"reason": str(e.reason)})})
+            reply("error", api.error_fields(e.code, str(e), e.reason))
             return
         log.info("learning a place (label %r) at the operator's request", job.label)
 
@@ -472,11 +471,7 @@ class Daemon:
         """cmd/set_pose: track from a pose the operator gives (design §7)."""
         request = api.parse(api.SetPoseRequest, queries.payload(query), "set_pose")
         self._operator_acted()
-        localiser = self.processing.localiser
-        if localiser is None:
-            why = self.supervisor.health["processing"].last_error or "starting"
-            raise api.RequestError(api.ErrorCode.REFUSED, f"the localiser is not running: {why}",
-                                   api.Reason.LOCALISER_NOT_RUNNING)
+        localiser = self._running_localiser()
         if request.place is None or not self.mapper.has_place(request.place):
             raise api.RequestError(api.ErrorCode.NOT_FOUND, f"place {request.place} is not in "
                                    f"the map ({self.mapper.place_count()} places)")
@@ -487,15 +482,20 @@ class Daemon:
         query.reply(query.key_expr, api.result(place=request.place, x=request.x, y=request.y,
                                                yaw=request.yaw))
 
-    def _answer_relocalise(self, query: zenoh.Query) -> None:
-        """cmd/relocalise: search the whole map for the robot (design §9)."""
-        api.parse(api.NoParameters, queries.payload(query), "relocalise")
-        self._operator_acted()
+    def _running_localiser(self) -> Localiser:
+        """The processing step's localiser; refused while the step (re)starts."""
         localiser = self.processing.localiser
         if localiser is None:
             why = self.supervisor.health["processing"].last_error or "starting"
             raise api.RequestError(api.ErrorCode.REFUSED, f"the localiser is not running: {why}",
                                    api.Reason.LOCALISER_NOT_RUNNING)
+        return localiser
+
+    def _answer_relocalise(self, query: zenoh.Query) -> None:
+        """cmd/relocalise: search the whole map for the robot (design §9)."""
+        api.parse(api.NoParameters, queries.payload(query), "relocalise")
+        self._operator_acted()
+        localiser = self._running_localiser()
         if self.mapper.place_count() == 0:
             raise api.RequestError(api.ErrorCode.REFUSED, "the map has no places to "
                                    "relocalise in", api.Reason.EMPTY_MAP)

@@ -25,8 +25,9 @@ from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.place import Place
 from daemon.mapping.settings import TblSettings
 from daemon.mapping.tbl import Progress
+from daemon.service import api
 from daemon.service.api import ErrorCode
-from daemon.service.learning import drive_tbl, frame_with_odometry, odometry_at_frame
+from daemon.service.learning import drive_tbl, frame_with_odometry
 from daemon.service.mapper import Link, Mapper, Seen
 from daemon.vision.unwarp import Unwarper
 from hal.base.base import BaseInfo, BaseStatus
@@ -100,15 +101,9 @@ class FeedSensors:
         self._link_up = link_up
 
     def frame(self) -> tuple[Frame, Odometry]:
-        return frame_with_odometry(self._next_frame, lambda f: odometry_at_frame(
-            self.buffer, f, lambda: self.feed.odometry(self._odometry_timeout_s),
-            self.settings, self._link_up), self.settings)
-
-    def _next_frame(self) -> Frame:
-        try:
-            return self.feed.next_frame(self.settings.frame_timeout_s)
-        except DeviceTimeoutError as e:
-            raise LearningError(f"frames stopped arriving during learning: {e}") from e
+        return frame_with_odometry(
+            self.feed.next_frame, self.buffer,
+            lambda: self.feed.odometry(self._odometry_timeout_s), self.settings, self._link_up)
 
 
 class BaseCommands:
@@ -269,7 +264,8 @@ class LearnJob:
         finally:
             if outcome.place is None:
                 self.mapper.cancel_place()
-                self._reply("error", {"code": str(outcome.error), "message": outcome.message})
+                self._reply("error", api.error_fields(outcome.error or ErrorCode.FAILED,
+                                                      outcome.message))
             self._on_done(self, outcome)
 
 

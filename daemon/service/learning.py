@@ -82,15 +82,20 @@ def odometry_at_frame(buffer: OdometryBuffer, frame: Frame,
     return buffer.at(frame.stamp_ns, max_extrapolation_ns=100_000_000)
 
 
-def frame_with_odometry(next_frame: Callable[[], Frame],
-                        odometry: Callable[[Frame], Odometry | None],
-                        settings: TblSettings) -> tuple[Frame, Odometry]:
-    """The next frame that odometry covers, with the odometry at its stamp; frames older
-    than the learn's first odometry sample are passed over, for ``frame_timeout_s``."""
+def frame_with_odometry(read_frame: Callable[[float], Frame], buffer: OdometryBuffer,
+                        read_odometry: Callable[[], list[Odometry]], settings: TblSettings,
+                        link_up: Callable[[], bool] = lambda: True) -> tuple[Frame, Odometry]:
+    """The next frame that odometry covers, with the odometry at its stamp (what every
+    :class:`Sensors` returns): ``read_frame(timeout_s)`` the camera's next frame,
+    ``read_odometry`` as :func:`odometry_at_frame` reads. Frames older than the learn's
+    first odometry sample are passed over, for ``frame_timeout_s``."""
     deadline = time.monotonic() + settings.frame_timeout_s
     while True:
-        frame = next_frame()
-        odo = odometry(frame)
+        try:
+            frame = read_frame(settings.frame_timeout_s)
+        except DeviceTimeoutError as e:
+            raise LearningError(f"frames stopped arriving during learning: {e}") from e
+        odo = odometry_at_frame(buffer, frame, read_odometry, settings, link_up)
         if odo is not None:
             return frame, odo
         if time.monotonic() >= deadline:
@@ -111,17 +116,7 @@ class DeviceSensors:
         self._on_odometry = on_odometry  # every sample read is also handed here
 
     def frame(self) -> tuple[Frame, Odometry]:
-        return frame_with_odometry(
-            self._next_frame,
-            lambda f: odometry_at_frame(self.odometry, f, self._read, self.settings),
-            self.settings)
-
-    def _next_frame(self) -> Frame:
-        try:
-            frame: Frame = self.camera.read(self.settings.frame_timeout_s)
-        except DeviceTimeoutError as e:
-            raise LearningError(f"frames stopped arriving during learning: {e}") from e
-        return frame
+        return frame_with_odometry(self.camera.read, self.odometry, self._read, self.settings)
 
     def _read(self) -> list[Odometry]:
         samples: list[Odometry] = self.base.read(self.odometry_timeout_s)

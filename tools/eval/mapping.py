@@ -218,11 +218,12 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
                 tbl = drive_tbl(sensors, base, localiser.unwarper, cfg.tbl,
                                 on_start=functools.partial(_begin, mapper, links, localiser))
             except LearningError:
-                localiser.learning(False)
                 mapper.cancel_place()
                 failures += 1
                 retry_at_m = path_m + RETRY_AFTER_M
                 continue
+            finally:
+                localiser.learning(False)
             learn_s.append((robot.now_ns() - start_ns) / 1e9)
             deadline_s += learn_s[-1] + (scenario.resume_after_s or 0.0)
             ref = _reference_pose(robot)
