@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-$(shell cat pyproject.toml | sha1sum | cut -c1-12)
 CONFIG ?= config/placecell.toml
 
-.PHONY: run test test-under-load lint typecheck pytest bench clean
+.PHONY: run test test-under-load lint typecheck pytest bench clean zenohd
 
 $(STAMP): pyproject.toml
 	@tools/setup-system.sh venv
@@ -20,6 +20,7 @@ run: $(STAMP)
 
 test: $(STAMP)
 	@tools/setup-system.sh test
+	@tools/build-zenohd.sh >/dev/null
 	$(MAKE) lint typecheck pytest
 
 # The suite with two busy-loop processes beside it, as on a robot's loaded computer.
@@ -35,6 +36,10 @@ typecheck: $(STAMP)
 
 pytest: $(STAMP)
 	$(BIN)/pytest -q -n 2 --dist loadgroup
+
+# zenoh's router at the binding's version, built once per machine (tools/build-zenohd.sh).
+zenohd: $(STAMP)
+	tools/build-zenohd.sh
 
 bench: $(STAMP)
 	$(BIN)/placecell-bench --json

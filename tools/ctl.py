@@ -10,7 +10,7 @@ import queue
 import sys
 import time
 import tomllib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -25,37 +25,59 @@ EXIT_OK, EXIT_USAGE, EXIT_UNREACHABLE, EXIT_REFUSED, EXIT_ABORTED, EXIT_FAILED =
 _EXIT_OF_CODE = {"aborted": EXIT_ABORTED, "failed": EXIT_FAILED}
 
 
-def _endpoints_from_config(path: str | None) -> tuple[str | None, list[str]]:
-    """The robot name and the daemon's listen endpoints, read from its config file."""
+def _endpoints_from_config(path: str | None) -> tuple[str | None, list[str], str]:
+    """The robot name, the daemon's listen endpoints and its ``[zenoh] id`` setting,
+    read from its config file."""
     p = Path(path or DEFAULT_CONFIG)
     if not p.is_file():
         if path:
             raise SystemExit(f"placecellctl: cannot read configuration {p}")
-        return None, ["tcp/127.0.0.1:7447"]
+        return None, ["tcp/127.0.0.1:7447"], ""
     data = tomllib.loads(p.read_text(encoding="utf-8"))
     robot = data.get("robot", {}).get("name")
-    listen = data.get("zenoh", {}).get("listen", ["tcp/127.0.0.1:7447"])
-    return robot, listen
+    zenoh_section = data.get("zenoh", {})
+    listen = zenoh_section.get("listen", ["tcp/127.0.0.1:7447"])
+    return robot, listen, str(zenoh_section.get("id", ""))
 
 
 def open_client(args: argparse.Namespace) -> tuple[zenoh.Session, str]:
-    robot, listen = _endpoints_from_config(args.config)
+    """A session connected to the daemon (listening nowhere itself: nobody needs to reach
+    a command line); ``args.robot_zid`` is then the node allowed to answer for the robot
+    (None when no robot is named: any answers)."""
+    robot, listen, configured_zid = _endpoints_from_config(args.config)
     connect = args.connect or [ep for ep in listen if not ep.endswith(":0")]
     session = zenoh_link.open_session(
-        "peer", ["tcp/127.0.0.1:0"], connect, multicast_scouting=False,
+        "peer", [], connect, multicast_scouting=False,
         config_file=args.zenoh_config or "")
-    return session, args.robot or robot or "*"
+    name = args.robot or robot
+    args.robot_zid = zenoh_link.robot_zid(name, configured_zid) if name else None
+    return session, name or "*"
 
 
-def query_json(session: zenoh.Session, key: str, timeout_s: float, payload: bytes = b""
-               ) -> list[dict[str, Any]]:
+def from_robot(replies: Any, robot_zid: str | None) -> Iterator[zenoh.Sample]:
+    """The successful replies that the robot's own node sent (docs/security.md): zenoh
+    tells who replied, and a reply from any other node is reported and dropped."""
+    for reply in replies:
+        if reply.ok is None:
+            continue
+        replier = reply.replier_id
+        if robot_zid is not None and (replier is None or str(replier.zid) != robot_zid):
+            print(f"placecellctl: ignored a reply on {reply.ok.key_expr} from "
+                  f"{replier.zid if replier else 'an unknown node'}, not the robot's node "
+                  f"{robot_zid}", file=sys.stderr)
+            continue
+        yield reply.ok
+
+
+def query_json(session: zenoh.Session, key: str, timeout_s: float, payload: bytes = b"",
+               robot_zid: str | None = None) -> list[dict[str, Any]]:
     out = []
-    for reply in session.get(key, payload=payload or None, timeout=timeout_s):
-        if reply.ok is not None:
-            try:
-                out.append(zenoh_link.decode(reply.ok.payload.to_bytes()))
-            except ValueError:
-                continue
+    for sample in from_robot(session.get(key, payload=payload or None, timeout=timeout_s),
+                             robot_zid):
+        try:
+            out.append(zenoh_link.decode(sample.payload.to_bytes()))
+        except ValueError:
+            continue
     return out
 
 
@@ -126,13 +148,12 @@ def cmd_learn(args: argparse.Namespace) -> int:
         try:
             # No consolidation: by default zenoh keeps only the last reply per key, and
             # every progress reply carries the same key.
-            for reply in session.get(key, payload=json.dumps(request).encode(),
-                                     consolidation=zenoh.ConsolidationMode.NONE,
-                                     timeout=args.learn_timeout):
-                if reply.ok is None:
-                    continue
+            for sample in from_robot(
+                    session.get(key, payload=json.dumps(request).encode(),
+                                consolidation=zenoh.ConsolidationMode.NONE,
+                                timeout=args.learn_timeout), args.robot_zid):
                 try:
-                    msg = zenoh_link.decode(reply.ok.payload.to_bytes())
+                    msg = zenoh_link.decode(sample.payload.to_bytes())
                 except ValueError:
                     continue
                 seen = True
@@ -181,7 +202,7 @@ def _simple_query(args: argparse.Namespace, leaf: str, payload: bytes = b""
     session, robot = open_client(args)
     key = zenoh_link.key(robot, leaf)
     try:
-        replies = query_json(session, key, args.timeout, payload)
+        replies = query_json(session, key, args.timeout, payload, args.robot_zid)
     finally:
         session.close()
     if not replies:
@@ -339,11 +360,11 @@ def cmd_place(args: argparse.Namespace) -> int:
     session, robot = open_client(args)
     key = zenoh_link.key(robot, f"map/place/{args.id}")
     try:
-        info = query_json(session, key, args.timeout)
+        info = query_json(session, key, args.timeout, robot_zid=args.robot_zid)
         png = b""
         if info and info[0].get("kind") != "error" and args.panorama:
-            png = next((r.ok.payload.to_bytes() for r in session.get(
-                f"{key}/panorama", timeout=args.timeout) if r.ok is not None), b"")
+            png = next((s.payload.to_bytes() for s in from_robot(session.get(
+                f"{key}/panorama", timeout=args.timeout), args.robot_zid)), b"")
     finally:
         session.close()
     if not info:
@@ -424,7 +445,8 @@ def _follow(args: argparse.Namespace, leaf: str, fmt: Callable[[dict[str, Any]],
 def cmd_status(args: argparse.Namespace) -> int:
     session, robot = open_client(args)
     try:
-        replies = query_json(session, zenoh_link.key(robot, "status"), args.timeout)
+        replies = query_json(session, zenoh_link.key(robot, "status"), args.timeout,
+                             robot_zid=args.robot_zid)
     finally:
         session.close()
     if not replies:
@@ -474,8 +496,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="zenoh endpoint of the daemon (default: its listen endpoints)")
     parser.add_argument("--robot", help="robot name (default: from the configuration)")
     parser.add_argument("--zenoh-config", metavar="FILE",
-                        help="a zenoh JSON5 file with this client's credentials "
-                        "(transport.auth.usrpwd), for a daemon with access control")
+                        help="a zenoh JSON5 file with this client's certificate and "
+                        "access control (config/zenoh/operator.json5 or viewer.json5; "
+                        "docs/security.md), for a daemon with access control")
     parser.add_argument("--timeout", type=float, default=3.0, help="seconds to wait for answers")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("status", help="show the daemon's health, rates and belief")

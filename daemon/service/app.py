@@ -25,7 +25,7 @@ from daemon.config import PlacecellConfig
 from daemon.localisation.localiser import Belief, Localiser
 from daemon.mapping.transition import Transition
 from daemon.mapping.unmapped import UnmappedWatch
-from daemon.service import api, queries, wire, zenoh_link
+from daemon.service import access, api, queries, wire, zenoh_link
 from daemon.service.components import (
     LatestFrame,
     OdometryInbox,
@@ -77,6 +77,8 @@ class Daemon:
         self._session: zenoh.Session | None = None
         self._publishers: dict[str, Any] = {}
         self._ros2: Ros2PosePublisher | None = None
+        self._access: access.AccessWatch | None = None
+        self._link_listener: Any = None
         self._view: FoxgloveView | None = None
         self._scene: LiveScene | None = None
         self._belief: Belief | None = None
@@ -183,10 +185,15 @@ class Daemon:
     # ------------------------------------------------------------------ zenoh
     def _open_zenoh(self) -> None:
         z = self.config.zenoh
-        self._session = zenoh_link.open_session(z.mode, z.listen, z.connect,
-                                                z.multicast_scouting, timestamping=True,
-                                                config_file=z.config_file)
-        s = self._session
+        conf = zenoh_link.make_config(z.mode, z.listen, z.connect, z.multicast_scouting,
+                                      timestamping=True, config_file=z.config_file,
+                                      zid=zenoh_link.robot_zid(self.robot, z.id))
+        self._session = s = zenoh_link.open_configured(conf, z.listen, z.connect)
+        acl = access.acl_of(conf)
+        if acl is not None:  # who connects, in which role (docs/security.md)
+            self._access = access.AccessWatch(acl)
+            self._link_listener = s.info.declare_link_events_listener(
+                self._access.on_link, history=True)
         self._token = s.liveliness().declare_token(zenoh_link.key(self.robot, "alive"))
         for leaf in ("status", "belief", "pose"):
             self._publishers[leaf] = s.declare_publisher(zenoh_link.key(self.robot, leaf))
@@ -705,6 +712,8 @@ class Daemon:
                     "mode": self.mode, "writable": not self.map.readonly,
                     "readonly_reason": self.map_readonly_reason},
             "job": self._job_summary(),
+            "access": (self._access.summary() if self._access is not None
+                       else access.disabled_summary()),
             "versions": {
                 "placecell": daemon.__version__,
                 "python": platform.python_version(),

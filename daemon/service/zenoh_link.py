@@ -7,6 +7,7 @@ so nothing leaves the machine unless the configuration says so.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 from typing import Any
@@ -14,6 +15,7 @@ from typing import Any
 import zenoh
 import zenoh.ext
 
+from daemon.service import access
 from kernel.errors import ConfigError
 
 log = logging.getLogger(__name__)
@@ -29,12 +31,20 @@ def key(robot: str, leaf: str) -> str:
 EVENTS_KEPT = 32
 
 
+def robot_zid(robot: str, configured: str = "") -> str:
+    """The robot's zenoh id: ``[zenoh] id`` when set, else one derived from its name, so
+    that placecellctl, reading the same configuration, knows which node may answer for
+    the robot (docs/security.md: replies from any other node are dropped)."""
+    return configured or hashlib.sha256(f"placecell/{robot}".encode()).hexdigest()[:32]
+
+
 def make_config(mode: str, listen: list[str], connect: list[str],
                 multicast_scouting: bool, timestamping: bool = False,
-                config_file: str = "") -> zenoh.Config:
+                config_file: str = "", zid: str = "") -> zenoh.Config:
     """A zenoh configuration that touches only the endpoints given; ``timestamping``
     for a session whose publishers keep a cache (the daemon's); ``config_file``: a zenoh
-    JSON5 file read first (access control and credentials, design §11)."""
+    JSON5 file read first (access control and certificates, docs/security.md); ``zid``:
+    the session's zenoh id (the robot's, robot_zid), random when empty."""
     try:
         conf = zenoh.Config.from_file(config_file) if config_file else zenoh.Config()
     except Exception as e:  # zenoh's own error for a missing or malformed file
@@ -46,15 +56,26 @@ def make_config(mode: str, listen: list[str], connect: list[str],
         conf.insert_json5("scouting/multicast/enabled", json.dumps(multicast_scouting))
         if timestamping:
             conf.insert_json5("timestamping/enabled", "true")
+        if zid:
+            conf.insert_json5("id", json.dumps(zid))
     except Exception as e:  # zenoh raises its own ZError for bad values
         raise ConfigError(f"[zenoh] invalid setting: {e}") from e
+    acl = access.acl_of(conf)
+    if acl is not None:
+        access.check_endpoints(acl, listen + connect)
     return conf
 
 
 def open_session(mode: str, listen: list[str], connect: list[str],
                  multicast_scouting: bool, timestamping: bool = False,
-                 config_file: str = "") -> zenoh.Session:
-    conf = make_config(mode, listen, connect, multicast_scouting, timestamping, config_file)
+                 config_file: str = "", zid: str = "") -> zenoh.Session:
+    conf = make_config(mode, listen, connect, multicast_scouting, timestamping, config_file,
+                       zid)
+    return open_configured(conf, listen, connect)
+
+
+def open_configured(conf: zenoh.Config, listen: list[str], connect: list[str]
+                    ) -> zenoh.Session:
     try:
         return zenoh.open(conf)
     except Exception as e:
