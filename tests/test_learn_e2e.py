@@ -409,7 +409,8 @@ def _abort_stops_the_robot(config: Path, truth: Truth) -> None:
     for line in third.stdout:
         if json.loads(line).get("phase") == "+x":
             break
-    time.sleep(1.0)  # well into the first arm
+    start = truth.samples()[-1][1:3]  # well into the first arm: 0.1 m along it
+    assert wait_for(lambda: math.dist(truth.samples()[-1][1:3], start) > 0.1, 30, 0.02)
     abort = _ctl(config, "abort", "--json")
     assert abort.returncode == 0, abort.stderr
     received_ns = _lines(abort.stdout)[-1]["received_ns"]
