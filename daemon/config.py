@@ -1,4 +1,4 @@
-"""The daemon's configuration: one TOML file, loaded strictly (SPEC §11).
+"""The daemon's configuration: one TOML file, loaded strictly (docs/design.md §11).
 
 ``config/placecell.toml`` is the documented default. Unknown keys, wrong types and
 out-of-range values raise :class:`ConfigError` naming ``section.key`` before any device
@@ -110,6 +110,9 @@ class ServiceSettings:
     status_period_s: float = setting(1.0, gt=0.0, le=60.0)
     restart_backoff_initial_s: float = setting(0.2, gt=0.0, le=60.0)
     restart_backoff_max_s: float = setting(1.0, gt=0.0, le=600.0)
+    fault_summary_s: float = setting(60.0, gt=0.0, le=86400.0,
+                                     doc="the same device failure again is reported as a "
+                                     "summary (how often, since when) once per this")
     stop_timeout_s: float = setting(1.5, gt=0.0, le=30.0, doc="grace period on SIGTERM")
     stale_after_s: float = setting(1.0, gt=0.0, le=60.0, doc="a device silent this long is faulty")
     min_processed_share: float = setting(

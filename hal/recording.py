@@ -1,4 +1,4 @@
-"""MCAP recordings: camera frames, odometry, base status, ground truth, beliefs (SPEC §10).
+"""MCAP recordings: camera frames, odometry, base status, ground truth, beliefs (design §10).
 
 Every channel carries JSON messages with a JSON schema, so standard MCAP tools (the
 ``mcap`` CLI, Foxglove) read them. Frames follow the ``foxglove.CompressedImage`` layout

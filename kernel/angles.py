@@ -1,4 +1,5 @@
-"""Angles: radians, wrapped to (-pi, pi] (SPEC conventions)."""
+"""Angles: radians, wrapped to (-pi, pi] (SI units in code and on the wire; degrees only
+where a person reads or types them)."""
 
 from __future__ import annotations
 

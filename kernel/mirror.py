@@ -1,4 +1,4 @@
-"""The mirror model: elevation and bearing of a world direction <-> raw image point (SPEC §2).
+"""The mirror model: elevation and bearing of a world direction <-> raw image point (design §2).
 
 Hyperboloid (X² + Y²)/a² − Z²/b² = −1 with foci at (0, 0, ±c), c² = a² + b² (§3.7.2,
 Yamazawa et al. 1995). The mirror is the upper sheet; the camera's pinhole sits at the lower

@@ -1,4 +1,4 @@
-"""Panorama conventions shared by every module that reads or writes panoramas (SPEC §2).
+"""Panorama conventions shared by every module that reads or writes panoramas (docs/design.md §2).
 
 A panorama array has shape ``(H, W + 2m, ...)``: the *core* of W columns covers 360°, and
 ``m`` wrap-margin columns copied from the other end stand on both sides (§3.7.2), so a
@@ -75,7 +75,7 @@ def to_grey(image: np.ndarray) -> np.ndarray:
 
 def geometry_checksum(mirror: object, panorama: object) -> str:
     """A short digest of everything that defines the panorama geometry (mirror model and
-    panorama settings): the map store refuses a map made with another one (SPEC §6)."""
+    panorama settings): the map store refuses a map made with another one (docs/design.md §6)."""
     import dataclasses
     import hashlib
     import json

@@ -5,7 +5,7 @@ a, its x axis turned by yaw. Composition follows the frames, ``T_a_c = T_a_b ∘
 (:meth:`SE2.compose`), and ``T_b_a = T_a_b⁻¹`` (:meth:`SE2.inverse`). Uncertain poses
 (:class:`UncertainSE2`) carry a 3 x 3 covariance of (x, y, yaw) and propagate it through
 the Jacobians below (the usual first-order rule Σ = J₁ Σ₁ J₁ᵀ + J₂ Σ₂ J₂ᵀ, as for the
-transitions of the topological map, SPEC §6, thesis §7.1).
+transitions of the topological map, docs/design.md §6, thesis §7.1).
 """
 
 from __future__ import annotations
@@ -23,6 +23,13 @@ class SE2:
     x: float = 0.0
     y: float = 0.0
     yaw: float = 0.0
+
+    def __repr__(self) -> str:  # plain floats, whatever numpy type was passed in
+        return f"SE2(x={float(self.x)!r}, y={float(self.y)!r}, yaw={float(self.yaw)!r})"
+
+    def __str__(self) -> str:  # as logs show a pose: metres and degrees
+        return (f"x {float(self.x):+.3f} m, y {float(self.y):+.3f} m, "
+                f"yaw {math.degrees(float(self.yaw)):+.1f} deg")
 
     @classmethod
     def of(cls, xyyaw: tuple[float, float, float] | np.ndarray) -> SE2:

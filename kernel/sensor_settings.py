@@ -1,4 +1,4 @@
-"""Settings of the panoramic sensor: mirror geometry and the unwarped panorama (SPEC §2)."""
+"""Settings of the panoramic sensor: mirror geometry and the unwarped panorama (design §2)."""
 
 from __future__ import annotations
 
@@ -13,13 +13,13 @@ class MirrorSettings:
     """Where the mirror's donut lies in the raw image and how radius maps to elevation."""
 
     model: Literal["hyperboloid", "polynomial"] = setting(
-        "hyperboloid", doc="radius-to-elevation model: hyperboloid (SPEC §2) or polynomial"
+        "hyperboloid", doc="radius-to-elevation model: hyperboloid (design §2) or polynomial"
     )
     center_x_px: float = setting(320.0, ge=0.0, doc="donut centre, image column")
     center_y_px: float = setting(240.0, ge=0.0, doc="donut centre, image row")
     r_inner_px: float = setting(50.0, gt=0.0, doc="inner donut radius used for the panorama")
     r_outer_px: float = setting(228.0, gt=0.0, doc="outer donut radius used for the panorama")
-    # Hyperboloid (X²+Y²)/a² − Z²/b² = −1, foci at ±c, c² = a² + b² (SPEC §2).
+    # Hyperboloid (X²+Y²)/a² − Z²/b² = −1, foci at ±c, c² = a² + b² (docs/design.md §2).
     a_m: float = setting(0.0233, gt=0.0, doc="hyperboloid semi-axis a")
     b_m: float = setting(0.0281, gt=0.0, doc="hyperboloid semi-axis b")
     focal_px: float = setting(520.0, gt=0.0, doc="camera focal length in pixels")
@@ -43,7 +43,7 @@ class MirrorSettings:
 
 @dataclass(frozen=True)
 class PanoramaSettings:
-    """The unwarped cylindrical panorama (SPEC §2)."""
+    """The unwarped cylindrical panorama (docs/design.md §2)."""
 
     width: int = setting(720, ge=64, le=4096, doc="columns over 360 degrees")
     height: int = setting(120, ge=16, le=1024, doc="rows over the elevation band")

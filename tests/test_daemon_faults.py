@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import signal
 import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -149,3 +150,44 @@ def test_camera_stall_of_3_s(tmp_path: Path) -> None:
             assert daemon.wait(10) == 0
     finally:
         watcher.close()
+
+
+def test_a_missing_camera_is_reported_once_then_summarised_and_learning_refused_at_once(
+        tmp_path: Path) -> None:
+    """A daemon left running on a camera that is not there: its failure is one event and
+    one ERROR line, then a summary per [service] fault_summary_s (not one a second that
+    pushes the useful events out); `learn` is refused at once, naming the camera."""
+    config, port = write_config(tmp_path, {
+        "camera": {"backend": "v4l2", "v4l2": {"device": "/dev/video-placecell-missing"}},
+        "service": {"fault_summary_s": 2.0}})
+    watcher = Watcher(port)
+    try:
+        with running_daemon(config):
+            # Wait until it has failed often enough for a summary: restarts counted in
+            # status, every 0.2-1 s.
+            watcher.wait(lambda st: st["components"]["camera"]["restarts"] >= 8, 60)
+            learn = subprocess.run(
+                [sys.executable, "-m", "tools.ctl", "--config", str(config), "learn",
+                 "--json"], capture_output=True, text=True, timeout=60)
+            restarts = watcher.status()["components"]["camera"]["restarts"]
+            # Every event since the start, as an operator's `events --follow` shows them
+            # (the daemon keeps the last 32 for late subscribers).
+            history = subprocess.run(
+                [sys.executable, "-m", "tools.ctl", "--config", str(config), "events",
+                 "--follow", "--json", "--duration", "3"], capture_output=True, text=True,
+                timeout=60)
+    finally:
+        watcher.session.close()
+    reply = json.loads(learn.stdout.splitlines()[-1])
+    assert learn.returncode == 4 and reply["reason"] == "camera_not_running", learn
+    assert "/dev/video-placecell-missing" in reply["message"]
+    events = [json.loads(line) for line in history.stdout.splitlines()]
+    assert events, history.stderr
+    faults = [e for e in events if e["event"] == "device_fault"]
+    assert faults and faults[0]["repeats"] == 1, faults
+    # One report, then summaries: far fewer events than failures.
+    assert len(faults) <= 1 + restarts // 2 and len(faults) < restarts, (len(faults), restarts)
+    summaries = faults[1:]
+    assert all(f["repeats"] > 1 and f["failing_for_s"] >= 1.5 for f in summaries), summaries
+    log = (tmp_path / "daemon.log").read_text()
+    assert log.count("camera failed:") == 1, log[-3000:]

@@ -73,3 +73,21 @@ def test_no_hint_where_there_is_nothing_to_run() -> None:
 
     assert hint({"code": "bad_request", "message": "req.x: ..."}) is None
     assert hint({"code": "failed"}) is None
+
+
+def test_a_repeated_fault_is_reported_once_then_summarised() -> None:
+    from daemon.service.supervisor import next_fault
+
+    s = 1_000_000_000
+    run, report = next_fault(None, "FileNotFoundError: /dev/video9", 0, 60.0)
+    assert report and run.count == 1 and run.first_ns == 0
+    for t in range(1, 60):  # once a second for a minute: quiet
+        run, report = next_fault(run, "FileNotFoundError: /dev/video9", t * s, 60.0)
+        assert not report, t
+    run, report = next_fault(run, "FileNotFoundError: /dev/video9", 60 * s, 60.0)
+    assert report and run.count == 61 and run.first_ns == 0  # the summary: 61 in 60 s
+    run, report = next_fault(run, "FileNotFoundError: /dev/video9", 61 * s, 60.0)
+    assert not report
+    # Another error is news at once, and starts its own run.
+    run, report = next_fault(run, "OSError: device busy", 62 * s, 60.0)
+    assert report and run.count == 1 and run.first_ns == 62 * s

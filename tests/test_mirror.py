@@ -1,4 +1,4 @@
-"""The mirror model of SPEC §2: hyperboloid optics, polynomial model, azimuth, inverses."""
+"""The mirror model of design §2: hyperboloid optics, polynomial model, azimuth, inverses."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The pose for ROS 2 over rmw_zenoh (design §11.1): the message, its key, attachment and
+"""The pose for ROS 2 over rmw_zenoh (design §11): the message, its key, attachment and
 liveliness tokens, checked against ``rosbags`` (an independent CDR decoder and type-hash
 computation) and, end to end, from a subscriber in its own process."""
 

@@ -1,4 +1,4 @@
-"""The LUT unwarper against an analytic raw image (SPEC §2, §3.7.2), without the renderer."""
+"""The LUT unwarper against an analytic raw image (design §2, §3.7.2), without the renderer."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The XR4000 wire protocol: codec, parsers and validation, piece by piece (SPEC §12)."""
+"""The XR4000 wire protocol: codec, parsers and validation, piece by piece (docs/design.md §12)."""
 
 from __future__ import annotations
 

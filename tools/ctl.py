@@ -6,6 +6,7 @@ import argparse
 import contextlib
 import json
 import math
+import os
 import queue
 import sys
 import time
@@ -100,6 +101,7 @@ HINTS = {
     "map_readonly": "the map file is read-only: `placecellctl status` says why; make it "
                     "writable and restart placecelld",
     "base_not_running": "`placecellctl status` shows the base's last error",
+    "camera_not_running": "`placecellctl status` shows the camera's last error",
     "base_cannot_move": "learning needs a base that can move: see [base] in the "
                         "daemon's configuration",
     "localiser_not_running": "`placecellctl status` shows the processing step's last error",
@@ -261,10 +263,12 @@ def cmd_map(args: argparse.Namespace) -> int:
                 graph = store.load()  # every place decoded, its digest checked...
                 for place in graph.places:  # ...and every panorama
                     store.reference_panorama(place.id)
-                info = {"file": str(args.file), "schema_version": store.meta("schema_version"),
+                info: dict[str, Any] = {
+                        "file": str(args.file), "schema_version": store.meta("schema_version"),
                         "geometry_checksum": store.meta("geometry_checksum"),
                         "places": len(graph), "transitions": len(graph.transitions),
-                        "bytes": Path(args.file).stat().st_size,
+                        # the file and its write-ahead log: where recent places sit
+                        "bytes": _map_bytes(Path(args.file)),
                         "labels": {p.id: p.label for p in graph.places},
                         # design §4-5: what global localisation has to work with
                         "floor_model": graph.floor is not None,
@@ -275,11 +279,13 @@ def cmd_map(args: argparse.Namespace) -> int:
                 _print(info)
             else:
                 print(f"{info['file']}: map schema {info['schema_version']}, geometry "
-                      f"{info['geometry_checksum']}, {info['places']} places, "
-                      f"{info['transitions']} transitions (both ways), {info['bytes']} bytes; "
-                      f"floor model {'learned' if info['floor_model'] else 'none'}, "
-                      f"{info['places_with_local_space']} places with a local space profile, "
-                      f"{info['lookalike_pairs']} look-alike pairs with features")
+                      f"{info['geometry_checksum']}, {_count(info['places'], 'place')}, "
+                      f"{_count(info['transitions'], 'transition')} (both ways), "
+                      f"{_size(info['bytes'])}; floor model "
+                      f"{'learned' if info['floor_model'] else 'none'}, "
+                      f"{_count(info['places_with_local_space'], 'place')} with a local "
+                      f"space profile, {_count(info['lookalike_pairs'], 'look-alike pair')} "
+                      "with features")
             return EXIT_OK
         if args.map_command == "export":
             with MapStore.open(args.file, None, readonly=True) as store:
@@ -306,16 +312,24 @@ def _done(args: argparse.Namespace, text: str, as_json: dict[str, Any]) -> None:
         print(text)
 
 
-def cmd_set_pose(args: argparse.Namespace) -> int:
-    """Tell the daemon where the robot stands in a place: it tracks from there."""
-    request: dict[str, Any] = {"place": args.place, "x": args.x, "y": args.y, "yaw": args.yaw}
+def set_pose_request(args: argparse.Namespace) -> dict[str, Any]:
+    """Degrees at the command line, as ``pose`` shows them; radians on the wire (docs/api)."""
+    request: dict[str, Any] = {"place": args.place, "x": args.x, "y": args.y,
+                               "yaw": math.radians(args.yaw)}
     if args.sigma_xy is not None:
         request["sigma_xy"] = args.sigma_xy
     if args.sigma_yaw is not None:
-        request["sigma_yaw"] = args.sigma_yaw
-    return _command(args, "cmd/set_pose", json.dumps(request).encode(), lambda r: (
-        f"pose set: place {r['place']} x {r['x']:.3f} m, y {r['y']:.3f} m, "
-        f"yaw {r['yaw']:.3f} rad"))
+        request["sigma_yaw"] = math.radians(args.sigma_yaw)
+    return request
+
+
+def cmd_set_pose(args: argparse.Namespace) -> int:
+    """Tell the daemon where the robot stands in a place: it tracks from there."""
+    def said(r: dict[str, Any]) -> str:
+        return (f"pose set: place {r['place']} x {r['x']:+.3f} m, y {r['y']:+.3f} m, "
+                f"yaw {math.degrees(r['yaw']):+.1f} deg")
+
+    return _command(args, "cmd/set_pose", json.dumps(set_pose_request(args)).encode(), said)
 
 
 def format_pose(p: dict[str, Any]) -> str:
@@ -336,10 +350,22 @@ def cmd_pose(args: argparse.Namespace) -> int:
 
 
 def format_belief(b: dict[str, Any]) -> str:
-    scores = ", ".join(f"{sc['place']}: {sc['lead']:+.3f}" for sc in b.get("scores", [])[:5])
+    """One line a person reads: the state (and the reason only where it adds to it), the
+    places' leads over their backgrounds, the frame's timings."""
     where = "" if b.get("place_id") is None else f" in place {b['place_id']}"
-    return (f"{b['state']}{where}: {b['reason'] or 'ok'}; confidence "
-            f"{b['confidence']:.2f}; leads over background {scores or 'none'}")
+    head = f"{b['state']}{where}"
+    reason = b.get("reason") or ""
+    parts = [head if not reason or reason == head else f"{head} ({reason})",
+             f"confidence {b['confidence']:.2f}"]
+    scores = b.get("scores", [])[:5]
+    parts.append("leads over background: " + (", ".join(
+        f"place {sc['place']} {sc['lead']:+.3f}" for sc in scores) if scores else "none"))
+    timings = b.get("timings_ms") or {}
+    if timings:
+        total = timings.get("total", sum(v for k, v in timings.items() if k != "total"))
+        stages = ", ".join(f"{k} {v:.1f}" for k, v in timings.items() if k != "total")
+        parts.append(f"frame {total:.1f} ms ({stages})")
+    return "; ".join(parts)
 
 
 def cmd_belief(args: argparse.Namespace) -> int:
@@ -387,10 +413,27 @@ def cmd_place(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def format_event(e: dict[str, Any]) -> str:
-    fields = ", ".join(f"{k} {v}" for k, v in e.items() if k not in ("schema", "event",
-                                                                      "stamp_ns"))
-    return f"{e.get('event')}: {fields}" if fields else str(e.get("event"))
+def _value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, float):
+        return f"{v:.3f}"
+    if isinstance(v, str):
+        return repr(v) if v else "none"
+    if isinstance(v, list | tuple):
+        return ", ".join(_value(x) for x in v) if v else "none"
+    if v is None:
+        return "none"
+    return str(v)
+
+
+def format_event(e: dict[str, Any], at: str = "") -> str:
+    """``at`` the time the daemon published it (zenoh's timestamp), then the event and
+    its fields as words: ``12:03:04.120 place_learned: place 3, label 'door', ...``."""
+    fields = ", ".join(f"{k.replace('_', ' ')} {_value(v)}" for k, v in e.items()
+                       if k not in ("schema", "event", "stamp_ns"))
+    text = f"{e.get('event')}: {fields}" if fields else str(e.get("event"))
+    return f"{at} {text}" if at else text
 
 
 def cmd_events(args: argparse.Namespace) -> int:
@@ -400,21 +443,30 @@ def cmd_events(args: argparse.Namespace) -> int:
 
 def cmd_relocalise(args: argparse.Namespace) -> int:
     return _command(args, "cmd/relocalise", b"", lambda r: (
-        f"relocalising: searching {r.get('places')} places"))
+        f"relocalising: searching {_count(int(r.get('places') or 0), 'place')}"))
 
 
-def _follow(args: argparse.Namespace, leaf: str, fmt: Callable[[dict[str, Any]], str],
+def _published_at(sample: Any) -> str:
+    """The local time of day the daemon published ``sample`` (its session stamps them)."""
+    stamp = sample.timestamp
+    if stamp is None:
+        return ""
+    return stamp.get_time().astimezone().strftime("%H:%M:%S.%f")[:-3]
+
+
+def _follow(args: argparse.Namespace, leaf: str, fmt: Callable[..., str],
             silence_ok: bool) -> int:
     """The next message on ``leaf``, or every one with --follow (--count, --duration);
     --json prints one object per line. Nothing heard: "not reachable", unless
     ``silence_ok`` (a quiet topic)."""
     session, robot = open_client(args)
     key = zenoh_link.key(robot, leaf)
-    messages: queue.Queue[dict[str, Any]] = queue.Queue()
+    messages: queue.Queue[tuple[dict[str, Any], str]] = queue.Queue()
 
     def on_sample(sample: Any) -> None:
         with contextlib.suppress(ValueError):  # not ours: ignored
-            messages.put(zenoh_link.decode(sample.payload.to_bytes()))
+            messages.put((zenoh_link.decode(sample.payload.to_bytes()),
+                          _published_at(sample)))
 
     subscriber = zenoh_link.declare_history_subscriber(session, key, on_sample) \
         if leaf == "events" else session.declare_subscriber(key, on_sample)
@@ -423,12 +475,13 @@ def _follow(args: argparse.Namespace, leaf: str, fmt: Callable[[dict[str, Any]],
         deadline = time.monotonic() + (args.duration if args.follow else args.timeout)
         while time.monotonic() < deadline:
             try:
-                message = messages.get(timeout=min(0.2, max(deadline - time.monotonic(),
-                                                             0.01)))
+                message, at = messages.get(timeout=min(0.2, max(deadline - time.monotonic(),
+                                                                 0.01)))
             except queue.Empty:
                 continue
-            print(json.dumps(message, separators=(",", ":")) if args.json else fmt(message),
-                  flush=True)
+            text = json.dumps(message, separators=(",", ":")) if args.json else (
+                fmt(message, at) if leaf == "events" else fmt(message))
+            print(text, flush=True)
             shown += 1
             if not args.follow or (args.count and shown >= args.count):
                 break
@@ -463,6 +516,20 @@ def _count(n: int, noun: str) -> str:
     return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
 
+def _map_bytes(path: Path) -> int:
+    """The map's size on disk: the SQLite file with its write-ahead log (a running daemon
+    keeps recent places there until a checkpoint)."""
+    return sum(p.stat().st_size for p in (path, Path(f"{path}-wal"), Path(f"{path}-shm"))
+               if p.exists())
+
+
+def _size(n: int) -> str:
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n >= scale:
+            return f"{n / scale:.1f} {unit}"
+    return _count(n, "byte")
+
+
 def format_status(st: dict[str, Any]) -> str:
     lines = [
         f"robot {st['robot']}: {'healthy' if st['healthy'] else 'DEGRADED'}, "
@@ -489,8 +556,12 @@ def format_status(st: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="placecellctl", description=__doc__)
+def make_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="placecellctl",
+        description="Talk to a running placecell daemon over zenoh: its status, pose, "
+                    "belief and events; learn a place, abort, set the pose, relocalise, "
+                    "switch modes; and work on map files offline (map info, export, import).")
     parser.add_argument("--config", help=f"the daemon's configuration (default {DEFAULT_CONFIG})")
     parser.add_argument("--connect", action="append",
                         help="zenoh endpoint of the daemon (default: its listen endpoints)")
@@ -518,10 +589,11 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("set-pose", help="tell the daemon where the robot stands in a place")
     p.add_argument("x", type=float, help="metres, in the place's frame")
     p.add_argument("y", type=float)
-    p.add_argument("yaw", type=float, help="radians")
+    p.add_argument("yaw", type=float, help="degrees")
     p.add_argument("--place", type=int, required=True, help="the place's id")
     p.add_argument("--sigma-xy", type=float, help="how sure, metres (default: the daemon's)")
-    p.add_argument("--sigma-yaw", type=float, help="radians; above 0.2 the view decides")
+    p.add_argument("--sigma-yaw", type=float,
+                   help="degrees; above 11.5 (0.2 rad) the view decides the heading")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_set_pose)
     for leaf, what, func in (("pose", "the robot's pose in the current place", cmd_pose),
@@ -567,12 +639,21 @@ def main(argv: list[str] | None = None) -> int:
     m.add_argument("file")
     m.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_map)
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = make_parser().parse_args(argv)
     try:
         return int(args.func(args))
     except zenoh_link.ConfigError as e:
         print(f"placecellctl: {e}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        # The reader went away (`placecellctl status | head -3`): a quiet end, as other
+        # command-line tools have; stdout goes to /dev/null so the exit flush is quiet too.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_OK
 
 
 if __name__ == "__main__":

@@ -23,7 +23,10 @@ SUBCOMMANDS = {
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="placecell-sim", description=__doc__)
+    parser = argparse.ArgumentParser(
+        prog="placecell-sim",
+        description="The simulator: generate worlds, render views, record runs, find "
+                    "the mirror in a camera image.")
     sub = parser.add_subparsers(dest="command", required=True)
     for name, (module_name, help_text) in SUBCOMMANDS.items():
         p = sub.add_parser(name, help=help_text)

@@ -209,7 +209,7 @@ class PlaceTracker:
         """1 for landmarks that appear at most ``max_zoom`` times larger or smaller than
         in the reference (reference depth over current distance), else 0: a fixed-size
         template on a landmark seen at another scale slides off its point and still
-        matches well (as in Turn Back and Look, design §3.3)."""
+        matches well (as in Turn Back and Look, design §3)."""
         g = self.geometry
         now = np.hypot(g.mean[:, 0] - pose[0], g.mean[:, 1] - pose[1])
         zoom = g.depth / np.maximum(now, 1e-3)

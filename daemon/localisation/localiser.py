@@ -117,7 +117,7 @@ class PoseRequest:
 class Localiser:
     """Frames and odometry in, beliefs out."""
 
-    # Odometry older than this at a frame's stamp counts as missing (SPEC §11: no invented
+    # Odometry older than this at a frame's stamp counts as missing (docs/design.md §11: no invented
     # motion while the base is silent).
     ODOMETRY_STALE_NS = 250_000_000
 

@@ -1,4 +1,4 @@
-"""The topological map in memory: places as nodes, transitions as edges (SPEC §6, ch. 7).
+"""The topological map in memory: places as nodes, transitions as edges (docs/design.md §6, ch. 7).
 
 Pure: the service loads it from the map file and adds what it stores. Every transition is
 held both ways, so neighbours are one dictionary lookup.

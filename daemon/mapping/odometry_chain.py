@@ -1,4 +1,4 @@
-"""The odometry between two reference poses, with the covariance it has earned (SPEC §6).
+"""The odometry between two reference poses, with the covariance it has earned (docs/design.md §6).
 
 When a place is learned after another in one unbroken run of odometry, the transition
 between them is the odometry motion from the first reference pose to the second (§7.1.2:

@@ -1,4 +1,4 @@
-"""A place of the topological map (SPEC §6, thesis §7.1): what the robot remembers of a spot.
+"""A place of the topological map (design §6, thesis §7.1): what the robot remembers of a spot.
 
 Pure data. The map file (daemon/store) persists it; the service stamps the creation time
 (the method reads no clock).

@@ -1,4 +1,4 @@
-"""Settings of place learning (Turn Back and Look, SPEC §3.2)."""
+"""Settings of place learning (Turn Back and Look, docs/design.md §3)."""
 
 from __future__ import annotations
 
@@ -59,7 +59,7 @@ class TblSettings:
 
 @dataclass(frozen=True)
 class OdometryNoiseSettings:
-    """How uncertain the base's odometry is (SPEC §6: a transition's covariance grows with
+    """How uncertain the base's odometry is (docs/design.md §6: a transition's covariance grows with
     the distance driven between the two reference poses). Random parts grow with the square
     root of the distance; the unknown systematic parts (a scale error and a heading drift
     per metre) are carried as states, so their effect grows with the distance itself."""
@@ -79,7 +79,7 @@ class OdometryNoiseSettings:
 
 @dataclass(frozen=True)
 class MappingSettings:
-    """Place learning in the running daemon (SPEC §6, §11)."""
+    """Place learning in the running daemon (docs/design.md §6, §11)."""
 
     mode: Literal["mapping", "localisation"] = setting(
         "mapping", doc="mapping: places may be learned; localisation: the map is read-only")

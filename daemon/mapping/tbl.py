@@ -1,4 +1,4 @@
-"""Turn Back and Look (SPEC §3.2-3.3, thesis §4.3, §4.6) as a pure state machine.
+"""Turn Back and Look (docs/design.md §3, thesis §4.3, §4.6) as a pure state machine.
 
 Given the two reference panoramas it selects the candidate landmarks statically (§4.2);
 then, frame by frame, it is handed the panorama, the odometry at the frame's stamp and
@@ -10,7 +10,7 @@ in the end keeps the best ``keep`` with their depths and covariances.
 The score is the candidate's recognition margin over the cross: on every
 ``margin_every``-th frame, its tracked NCC minus the best NCC of its best look-alike
 anywhere else in the panorama, capped at ``margin_cap``, averaged. The thesis scores the
-mean NCC alone (§4.3, SPEC §3.2), meant to keep the landmarks "recognisable over a large
+mean NCC alone (§4.3, docs/design.md §3), meant to keep the landmarks "recognisable over a large
 area"; but a landmark is recognised only where it beats everything else in view, and in
 cluttered rooms the generic corners that track best are the ones that look like much
 else. ``placecell-eval recognition-range`` measures it: over the candidates, the rank

@@ -1,4 +1,4 @@
-"""Transitions: the edges of the topological map (SPEC §6).
+"""Transitions: the edges of the topological map (docs/design.md §6).
 
 A transition from place a to place b is ``T_a_b``, b's reference frame expressed in a's,
 an SE(2) transform with the 3 x 3 covariance of (x, y, yaw) -- the thesis stored only a

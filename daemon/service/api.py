@@ -42,6 +42,7 @@ class Reason(StrEnum):
     LOCALISATION_MODE = "localisation_mode"  # the map is read-only by the mode
     MAP_READONLY = "map_readonly"  # the map file cannot be written
     BASE_NOT_RUNNING = "base_not_running"
+    CAMERA_NOT_RUNNING = "camera_not_running"
     BASE_CANNOT_MOVE = "base_cannot_move"
     LOCALISER_NOT_RUNNING = "localiser_not_running"
     EMPTY_MAP = "empty_map"

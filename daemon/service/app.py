@@ -106,7 +106,7 @@ class Daemon:
         self._saved: SavedPose | None = None  # the one saved last
         self.supervisor = Supervisor(
             config.service.restart_backoff_initial_s, config.service.restart_backoff_max_s,
-            on_event=self.publish_event,
+            on_event=self.publish_event, fault_summary_s=config.service.fault_summary_s,
         )
         self._build_components()
 
@@ -199,7 +199,7 @@ class Daemon:
             self._publishers[leaf] = s.declare_publisher(zenoh_link.key(self.robot, leaf))
         self._publishers["events"] = zenoh_link.declare_event_publisher(
             s, zenoh_link.key(self.robot, "events"))
-        if self.config.ros2.enabled:  # the pose for ROS 2 nodes (design §11.1)
+        if self.config.ros2.enabled:  # the pose for ROS 2 nodes (design §11)
             self._ros2 = Ros2PosePublisher(s, self.config.ros2)
             log.info("ROS 2: publishing %s on %s", self.config.ros2.topic, self._ros2.key)
         # Late joiners (placecellctl status) get the latest status at once by query.
@@ -337,6 +337,11 @@ class Daemon:
             raise api.RequestError(api.ErrorCode.REFUSED, "the base is not running: "
                                    f"{self.supervisor.health['base'].last_error or 'starting'}",
                                    api.Reason.BASE_NOT_RUNNING)
+        camera = self.supervisor.health["camera"]
+        if camera.state != "running":  # refused now, not after the cross is driven
+            raise api.RequestError(api.ErrorCode.REFUSED, "the camera is not running: "
+                                   f"{camera.last_error or 'starting'}",
+                                   api.Reason.CAMERA_NOT_RUNNING)
         if not device.info.can_move:
             raise api.RequestError(api.ErrorCode.REFUSED, f"the base ({device.info.backend}) "
                                    "cannot move: Turn Back and Look needs to drive the cross",
@@ -607,7 +612,7 @@ class Daemon:
             log.warning("live view: %s", e)
 
     def _publish_ros2(self, belief: Belief, place: SE2, in_map: SE2) -> None:
-        """The tracked pose in the ``map`` frame for ROS 2 (design §11.1): its covariance
+        """The tracked pose in the ``map`` frame for ROS 2 (design §11): its covariance
         turned by the place's heading in the map, the stamp on the UNIX clock."""
         assert self._ros2 is not None and belief.covariance is not None
         c, s = math.cos(place.yaw), math.sin(place.yaw)
@@ -731,7 +736,7 @@ class Daemon:
             "label": job.label}
 
     def _belief_summary(self, belief: Belief | None, now_ns: int) -> dict[str, Any]:
-        """The belief as status reports it: honest about missing sensors (SPEC §11)."""
+        """The belief as status reports it: honest about missing sensors (docs/design.md §11)."""
         health = self.supervisor.health
         stale_ns = self.config.service.stale_after_s * 1e9
         frames_ok = (health["camera"].state == "running" and belief is not None

@@ -1,4 +1,4 @@
-"""Learning a place as a job of the running daemon (design §3.2, §6, §11).
+"""Learning a place as a job of the running daemon (design §3, §6, §11).
 
 The job never reads a device: frames and odometry come through a :class:`FrameFeed` that
 the processing component fills while the job is attached, and moves go through the base

@@ -1,5 +1,5 @@
 """Learning a place: the Turn-Back-and-Look state machine (daemon/mapping/tbl.py) driven
-with frames, odometry and moves (design §3.2, thesis §4.3).
+with frames, odometry and moves (design §3, thesis §4.3).
 
 One loop, :func:`drive_tbl`, for every caller. What differs is where frames and odometry
 come from (:class:`Sensors`): in the daemon from the components that own the devices

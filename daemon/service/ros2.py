@@ -1,4 +1,4 @@
-"""The pose for ROS 2 nodes, exactly as rmw_zenoh carries it (design §11.1).
+"""The pose for ROS 2 nodes, exactly as rmw_zenoh carries it (design §11).
 
 A ROS 2 system running rmw_zenoh (Humble, Jazzy) sees placecell as a node ``placecell``
 with one publisher of ``geometry_msgs/msg/PoseWithCovarianceStamped`` on ``[ros2] topic``:

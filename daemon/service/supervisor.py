@@ -4,11 +4,13 @@ A component is a device (camera, base) or the processing step. Its thread runs
 ``setup()`` then ``step()`` until stopped; any exception is logged with what failed and why,
 reported as an event, the component is torn down, and after a backoff (doubling from
 ``restart_backoff_initial_s`` up to ``restart_backoff_max_s``) it is set up again. The
-daemon itself never exits because a device failed.
+same failure again is reported as a summary once per ``fault_summary_s``. The daemon
+itself never exits because a device failed.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 import time
@@ -35,11 +37,36 @@ class Component(Protocol):
         """Release everything; must not raise and must be safe to call twice."""
 
 
+@dataclasses.dataclass(frozen=True)
+class FaultRun:
+    """A run of the same failure of one component: what, since when, how often, and when
+    it was last reported."""
+
+    error: str
+    first_ns: int
+    count: int
+    reported_ns: int
+
+
+def next_fault(run: FaultRun | None, error: str, now_ns: int, summary_every_s: float
+               ) -> tuple[FaultRun, bool]:
+    """The run after one more failure, and whether to report it now: a new failure (or
+    another error than the run's) at once; the same one again only as a summary, once per
+    ``summary_every_s`` (a camera unplugged all night is two lines a minute, not two a
+    second that push everything else out of the log and the event history)."""
+    if run is None or run.error != error:
+        return FaultRun(error, now_ns, 1, now_ns), True
+    due = now_ns - run.reported_ns >= summary_every_s * 1e9
+    return dataclasses.replace(run, count=run.count + 1,
+                               reported_ns=now_ns if due else run.reported_ns), due
+
+
 class Supervisor:
     def __init__(self, backoff_initial_s: float, backoff_max_s: float,
-                 on_event: EventSink | None = None) -> None:
+                 on_event: EventSink | None = None, fault_summary_s: float = 60.0) -> None:
         self._backoff_initial_s = backoff_initial_s
         self._backoff_max_s = backoff_max_s
+        self._fault_summary_s = fault_summary_s
         self._on_event = on_event or (lambda kind, **fields: None)
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
@@ -87,6 +114,7 @@ class Supervisor:
 
     def _run(self, component: Component, health: ComponentHealth) -> None:
         backoff = self._backoff_initial_s
+        faults: FaultRun | None = None
         while not self._stop.is_set():
             try:
                 health.state = "starting"
@@ -99,6 +127,7 @@ class Supervisor:
                         # Running means delivering: the first step after set-up worked.
                         health.state = "running"
                         backoff = self._backoff_initial_s
+                        faults = None
                         if health.last_error is not None:
                             log.info("%s recovered after %d restart(s)", component.name,
                                      health.restarts)
@@ -106,13 +135,25 @@ class Supervisor:
                                            restarts=health.restarts)
             except Exception as e:  # noqa: BLE001 - the supervisor's whole job
                 reason = f"{type(e).__name__}: {e}"
-                log.error("%s failed: %s; restarting in %.2f s", component.name, reason, backoff)
+                now = time.monotonic_ns()
                 health.state = "backoff"
                 health.last_error = reason
-                health.last_error_mono_ns = time.monotonic_ns()
+                health.last_error_mono_ns = now
                 health.restarts += 1
-                self._on_event("device_fault", component=component.name, error=reason,
-                               retry_in_s=backoff)
+                faults, report = next_fault(faults, reason, now, self._fault_summary_s)
+                since_s = (now - faults.first_ns) / 1e9
+                if not report:
+                    log.debug("%s failed again: %s", component.name, reason)
+                elif faults.count == 1:
+                    log.error("%s failed: %s; restarting in %.2f s", component.name, reason,
+                              backoff)
+                else:
+                    log.error("%s still failing: %d times in %.0f s, %s; retrying every "
+                              "%.2f s", component.name, faults.count, since_s, reason, backoff)
+                if report:
+                    self._on_event("device_fault", component=component.name, error=reason,
+                                   retry_in_s=backoff, repeats=faults.count,
+                                   failing_for_s=round(since_s, 3))
                 _teardown(component)
                 self._wait(backoff, health)
                 backoff = min(backoff * 2.0, self._backoff_max_s)

@@ -1,4 +1,4 @@
-"""The daemon's zenoh session and key space (SPEC §11).
+"""The daemon's zenoh session and key space (docs/design.md §11).
 
 Keys live under ``placecell/<robot>/``; payloads are JSON objects with a ``schema`` field.
 By default the session is a peer listening on 127.0.0.1 only with multicast scouting off,

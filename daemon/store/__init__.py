@@ -1,1 +1,1 @@
-"""The map file: the topological map in one SQLite file, and its folder export (SPEC §6)."""
+"""The map file: the topological map in one SQLite file, and its folder export (design §6)."""

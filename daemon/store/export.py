@@ -1,4 +1,4 @@
-"""Map export to a folder for inspection, and import back (SPEC §6).
+"""Map export to a folder for inspection, and import back (docs/design.md §6).
 
 A folder holds ``manifest.json`` (format, schema, geometry checksum), ``places.json``
 (every place with its landmarks: row, column, bearing, depth, covariance, score, and the

@@ -1,4 +1,4 @@
-"""The map file: the topological map in one SQLite file (SPEC §6; docs/design.md, "Map file").
+"""The map file: the topological map in one SQLite file (design §6; docs/design.md, "Map file").
 
 - WAL journal: a reader (``placecellctl map info``, a second process) is never blocked by
   the daemon writing, and a crash (even SIGKILL) loses at most the place being written.

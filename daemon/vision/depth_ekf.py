@@ -1,4 +1,4 @@
-"""Landmark depth by a bearing-only EKF during Turn Back and Look (SPEC §3.3, thesis §4.6).
+"""Landmark depth by a bearing-only EKF during Turn Back and Look (docs/design.md §3, thesis §4.6).
 
 State: the robot pose (x, y, θ) relative to the reference pose, then for each landmark
 (ρ_i, γ_i): inverse depth and reference bearing. Inverse depth (ρ = 1/d) keeps the

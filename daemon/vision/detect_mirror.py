@@ -1,4 +1,4 @@
-"""Find the mirror's donut in a raw image: centre and inner/outer radii (SPEC §2).
+"""Find the mirror's donut in a raw image: centre and inner/outer radii (docs/design.md §2).
 
 A starting point for ``[mirror]`` on a new camera, real or rendered, that says how well
 each radius was measured and refuses rather than print a wrong circle:

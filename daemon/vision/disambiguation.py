@@ -1,4 +1,4 @@
-"""Disambiguating features (SPEC §5, thesis chapter 6 and §9.5): the patch of one place's
+"""Disambiguating features (docs/design.md §5, thesis chapter 6 and §9.5): the patch of one place's
 view that a look-alike place lacks, and the decision between the two by it.
 
 For a pair of places A and B that the lower levels cannot tell apart, A's feature is the

@@ -1,4 +1,4 @@
-"""Floor ("carpet") detection in the panorama (SPEC §4, thesis §5.1).
+"""Floor ("carpet") detection in the panorama (docs/design.md §4, thesis §5.1).
 
 Two detectors, each a per-pixel probability of floor, fused with the Bayes rule in a
 per-pixel log-odds grid over methods and over time (§5.1.4):
@@ -66,7 +66,7 @@ class ColourModel:
 
 @dataclass(frozen=True)
 class FloorModel:
-    """What the robot learns about the floor (stored with the map, SPEC §4): its colour
+    """What the robot learns about the floor (stored with the map, docs/design.md §4): its colour
     and the vertical step its texture does not make (:func:`texture_threshold`)."""
 
     colour: ColourModel

@@ -1,4 +1,4 @@
-"""Landmarks and landmark sets: what a place is made of (SPEC §3, thesis chapter 4).
+"""Landmarks and landmark sets: what a place is made of (docs/design.md §3, thesis chapter 4).
 
 Positions are in panorama array coordinates (with wrap margin): ``col``/``row`` of the
 template's top-left pixel. Bearings follow kernel/panorama.py.
@@ -30,7 +30,7 @@ class Landmark:
 
 @dataclass(frozen=True)
 class LandmarkSet:
-    """A place's landmarks (16 after TBL, SPEC §3.2) and the panorama width they live in."""
+    """A place's landmarks (16 after TBL, docs/design.md §3) and the panorama width they live in."""
 
     landmarks: tuple[Landmark, ...]
     width: int  # panorama core columns (bearing per column)

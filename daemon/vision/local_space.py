@@ -1,4 +1,4 @@
-"""Local space profiles (SPEC §4, thesis §5.2): how far the free floor reaches around the
+"""Local space profiles (docs/design.md §4, thesis §5.2): how far the free floor reaches around the
 robot, in 16 directions, and a rotation-invariant comparison of two of them.
 
 The profile's bin k is the mean, over the k-th sixteenth of the panorama's columns, of
@@ -97,7 +97,7 @@ class LocalSpace:
 
     def learn_floor(self, core_bgr: np.ndarray) -> None:
         """The floor model from the bottom ``SAMPLE_ROWS`` rows within ``AHEAD_DEG`` of
-        ahead (SPEC §4: the region right in front of the robot at start-up): its colour
+        ahead (docs/design.md §4: the region right in front of the robot at start-up): its colour
         and the step its texture does not make. The grid starts again."""
         width = core_bgr.shape[1]
         centre = int(round(float(column_of_bearing(0.0, width))))

@@ -1,4 +1,4 @@
-"""Recognising a landmark set in a panorama (SPEC §3.4, thesis §4.4).
+"""Recognising a landmark set in a panorama (docs/design.md §3, thesis §4.4).
 
 LRP_p(i) = mean over the landmarks of place p of the best NCC of each template anywhere
 in panorama i. ``lrp_bruteforce`` is the reference: ``cv2.matchTemplate`` (normalised) of

@@ -1,4 +1,4 @@
-"""Static landmark selection (SPEC §3.1, thesis §4.2).
+"""Static landmark selection (docs/design.md §3, thesis §4.2).
 
 For every candidate 16 x 16 template T at (x, y) of panorama 1, T is slid over the 32 x 32
 window centred on (x, y) of panorama 2 with SAD (deliberately not normalised), giving a
@@ -81,7 +81,7 @@ def texture(p: np.ndarray) -> np.ndarray:
 def select_static(pano1: np.ndarray, pano2: np.ndarray, margin: int, *, count: int = 32,
                   per_sector: int = 8, min_texture: float = MIN_TEXTURE, variant: str = "ring",
                   exclude_rows: tuple[int, int] | None = None) -> LandmarkSet:
-    """The ``count`` best landmarks, ``per_sector`` from each 90° sector (SPEC §3.1).
+    """The ``count`` best landmarks, ``per_sector`` from each 90° sector (docs/design.md §3).
 
     pano1/pano2: two panoramas (with wrap margin ``margin``) at the reference pose."""
     g1 = core_of(to_grey(pano1), margin)

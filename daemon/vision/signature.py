@@ -1,5 +1,5 @@
 """A rotation-invariant signature of a whole panorama: a cheap cue of where the robot is
-(SPEC §4 "go beyond", design §9; in the role of thesis §9.4's local space cue).
+(docs/design.md §4 "go beyond", design §9; in the role of thesis §9.4's local space cue).
 
 The grey panorama's rows are averaged in ``BANDS`` horizontal bands; each band is a
 periodic signal along azimuth, and the magnitudes of its first ``HARMONICS`` Fourier

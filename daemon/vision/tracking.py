@@ -1,4 +1,4 @@
-"""Tracking landmark templates between frames (SPEC §3.2, thesis §4.5.2).
+"""Tracking landmark templates between frames (docs/design.md §3, thesis §4.5.2).
 
 Each template is matched with zero-mean NCC in a small window around its predicted
 position (from odometry and the landmark's depth where known, else its last position);

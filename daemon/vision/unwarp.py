@@ -45,7 +45,7 @@ class Unwarper:
 
     def geometry_checksum(self) -> str:
         """Digest of the mirror and panorama settings that define this panorama geometry
-        (stored with a map, SPEC §6)."""
+        (stored with a map, docs/design.md §6)."""
         return geometry_checksum(self.mirror, self.panorama)
 
     def floor_distance_of_rows(self) -> np.ndarray:

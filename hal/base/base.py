@@ -1,4 +1,4 @@
-"""The mobile base interface (SPEC §1, §12): odometry samples, status and motion commands."""
+"""The mobile base interface (design §1, §12): odometry samples, status and motion commands."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from kernel.types import Odometry
 
 @dataclass(frozen=True)
 class BaseStatus:
-    """Status flags of the base controller (SPEC §12 bit layout)."""
+    """Status flags of the base controller (docs/design.md §12 bit layout)."""
 
     moving: bool = False
     move_done: bool = False

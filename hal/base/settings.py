@@ -14,7 +14,7 @@ class SimBaseSettings:
     max_accel_m_s2: float = setting(1.0, gt=0.0, le=10.0)
     max_yaw_rate_rad_s: float = setting(1.5, gt=0.0, le=10.0)
     max_yaw_accel_rad_s2: float = setting(3.0, gt=0.0, le=50.0)
-    # Drift (SPEC §10): odometry = truth distorted by these.
+    # Drift (docs/design.md §10): odometry = truth distorted by these.
     scale_error: float = setting(0.005, ge=-0.2, le=0.2, doc="fractional error of distance")
     heading_bias_rad_per_m: float = setting(
         0.016, ge=-0.5, le=0.5,

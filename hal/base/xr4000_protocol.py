@@ -1,4 +1,4 @@
-"""The XR4000 base-controller link (SPEC §12): codec, parsers and validation, both
+"""The XR4000 base-controller link (docs/design.md §12): codec, parsers and validation, both
 transports. Pure: bytes and frames in, messages and counters out.
 
 Serial (115200 8N1): ASCII lines ``$TYPE,f1,f2,...*HH\\r\\n``, HH = XOR of the bytes between
@@ -15,7 +15,7 @@ CAN (500 kbit/s, little-endian):
   0x200 stop               (empty)
   0x182 command answer     uint16 counter, uint8 command (0 stop, 1 move, 2 velocity),
                            uint8 result (0 accepted, else the NAK reason code)
-  SPEC §12 gives CAN no acknowledgement; 0x182 is this project's: the controller answers
+  docs/design.md §12 gives CAN no acknowledgement; 0x182 is this project's: the controller answers
   every command frame, counting them, so the daemon knows each was received and accepted.
 
 Anything malformed is counted by reason and dropped, never trusted.

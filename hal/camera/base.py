@@ -1,4 +1,4 @@
-"""The camera interface (SPEC §1): frames with a monotonic stamp and a sequence number."""
+"""The camera interface (docs/design.md §1): frames with a monotonic stamp and a sequence number."""
 
 from __future__ import annotations
 

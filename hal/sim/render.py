@@ -1,4 +1,4 @@
-"""The simulated mirror camera: ray-cast panorama, warped into the raw donut (SPEC §10).
+"""The simulated mirror camera: ray-cast panorama, warped into the raw donut (docs/design.md §10).
 
 Per panorama column a ray is cast from the camera over the floor plan (nearest full-height
 wall, nearest low obstacle, nearest person); per row the elevation decides whether the wall,

@@ -7,7 +7,7 @@ camera read advances to the next frame time, so runs are fast and deterministic)
 
 Motion: relative moves (trapezoidal speed profile under speed and acceleration limits) and
 velocity commands, in the robot frame; a scenario's autopilot drives the robot until a
-command arrives. Odometry integrates the true motion distorted by drift (SPEC §10): a scale
+command arrives. Odometry integrates the true motion distorted by drift (design §10): a scale
 error, a heading bias per metre, and random walks per square-root metre.
 """
 
@@ -139,7 +139,7 @@ class SimRobot:
             del self._samples[:5_000]
 
     def _integrate_odometry(self, dx: float, dy: float, dyaw: float, half: float) -> None:
-        """Odometry = true body motion with drift (SPEC §10)."""
+        """Odometry = true body motion with drift (docs/design.md §10)."""
         b = self.base
         ds = math.hypot(dx, dy)
         if ds > 0:
@@ -294,7 +294,7 @@ class SimRobot:
             self._vel = (0.0, 0.0, 0.0)
 
     def kidnap(self, x: float, y: float, yaw: float) -> None:
-        """Teleport the robot; odometry does not notice (SPEC §9.6)."""
+        """Teleport the robot; odometry does not notice (docs/design.md §9)."""
         with self._lock:
             self._pose = (x, y, float(wrap_angle(yaw)))
             self._move = None

@@ -1,4 +1,4 @@
-"""Scenarios: what happens in a simulated run (SPEC §10). Format: config/scenarios/README.md.
+"""Scenarios: what happens in a simulated run (design §10). Format: config/scenarios/README.md.
 
 A scenario names a world, a start pose, a trajectory for the autopilot (waypoints, a TBL
 cross, laps of a loop, a tour), image noise and illumination over time, people walking
@@ -292,7 +292,7 @@ def _trajectory(traj: dict[str, Any], start: Pose | None, world: str) -> list[Wa
         if not out:
             raise ConfigError("trajectory.waypoints: at least one waypoint")
         return out
-    if kind == "tbl":  # the Turn-Back-and-Look cross around the start pose (SPEC §3.2)
+    if kind == "tbl":  # the Turn-Back-and-Look cross around the start pose (docs/design.md §3)
         if start is None:
             raise ConfigError("trajectory kind 'tbl' needs scenario.start_pose")
         e = _num(traj.get("extent_m", 0.5), "trajectory.extent_m", 0.01)

@@ -1,4 +1,4 @@
-"""Simulated worlds: a 2-D floor plan of textured walls and obstacles (SPEC §10).
+"""Simulated worlds: a 2-D floor plan of textured walls and obstacles (docs/design.md §10).
 
 A world file is TOML (format documented in ``config/worlds/README.md``). ``load_world`` also
 accepts ``generate:<kind>:<seed>`` for a generated world (``hal/sim/worldgen.py``).

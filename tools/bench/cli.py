@@ -27,7 +27,10 @@ GROUPS = {
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="placecell-bench", description=__doc__)
+    parser = argparse.ArgumentParser(
+        prog="placecell-bench",
+        description="Measure placecell's speed: named figures, each the median of "
+                    "--repeats runs, ratios against a baseline measured in the same run.")
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--only", choices=sorted(GROUPS), action="append")

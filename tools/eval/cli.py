@@ -20,7 +20,7 @@ from kernel.errors import PlacecellError
 
 # experiment -> (module, default world kind, one-line help)
 EXPERIMENTS: dict[str, tuple[str, str, str]] = {
-    "depth": ("tools.eval.depth", "open-room", "TBL depth-estimate error (SPEC §3.3)"),
+    "depth": ("tools.eval.depth", "open-room", "TBL depth-estimate error (docs/design.md §3)"),
     "recognise": ("tools.eval.recognise", "", "LRP of a landmark set in real images"),
     "recognition-range": (
         "tools.eval.recognition_range", "open-room", "area where a place's LRP stays up (§3.4)"
@@ -48,7 +48,11 @@ EXPERIMENTS: dict[str, tuple[str, str, str]] = {
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="placecell-eval", description=__doc__)
+    parser = argparse.ArgumentParser(
+        prog="placecell-eval",
+        description="Run one of placecell's experiments on a simulated world and print its "
+                    "metrics (--json: one JSON object with the world, seeds, settings and "
+                    "metrics). Worlds are drawn from --world-kind and --world-seed.")
     sub = parser.add_subparsers(dest="experiment", required=True)
     for name, (module_name, world_kind, help_text) in EXPERIMENTS.items():
         p = sub.add_parser(name, help=help_text)

@@ -1,12 +1,12 @@
 """``placecell-eval depth``: depth estimates of Turn Back and Look against the world
-(SPEC §3.3, thesis §4.6.4-4.6.5).
+(docs/design.md §3, thesis §4.6.4-4.6.5).
 
 For each place (a pose in a world), the simulated robot learns the place through the
 daemon's own learning routine (lock-step simulation, the HAL sim backends); each landmark's
 estimated depth is compared with the distance to the surface seen at its reference
 bearing and row, and its 2 x 2 covariance with that error (2-sigma ellipse: Mahalanobis
 distance <= 2, 86 % for an honest Gaussian). Errors are also reported for the landmarks
-within 1 m (SPEC §3.3 expects ±0.1 m there).
+within 1 m (docs/design.md §3 expects ±0.1 m there).
 
 ``--artificial`` is the corridor of the thesis's artificial-landmark test (§4.6.4): flat
 markers on both walls 0.7 m away; TBL chooses its landmarks as the daemon would. With
@@ -39,7 +39,7 @@ from tools.eval.truth import landmark_depth
 DRAWS_PLOTS = True  # --plots DIR: depth.png, estimate against truth with 2-sigma bars
 ARTIFICIAL = str(Path(__file__).resolve().parents[2] / "config" / "worlds" /
                  "artificial-corridor.toml")
-MARKER_REACH_M = 1.0  # SPEC §3.3: ±0.1 m for landmarks within ~1 m
+MARKER_REACH_M = 1.0  # docs/design.md §3: ±0.1 m for landmarks within ~1 m
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             error = lm.depth - truth
             errors.append(abs(error))
             plotted.append((truth, lm.depth, 2.0 * math.sqrt(lm.covariance[0, 0])))
-            if truth <= 1.0:  # SPEC §3.3: ±0.1 m expected for landmarks within ~1 m
+            if truth <= 1.0:  # docs/design.md §3: ±0.1 m expected for landmarks within ~1 m
                 near_errors.append(abs(error))
             # Squared Mahalanobis distance under the (d, γ) covariance; inside the 2-sigma
             # ellipse when <= 4 (a perfect Gaussian: 1 − e^−2 = 86 %).

@@ -28,7 +28,7 @@ from a fresh grid after 10 frames 1 m away (free direction chosen at random), wi
 ``move_1m_over_0p1`` the share of poses where it exceeds 0.1, and
 ``move_1m_over_0p1_true_floor`` the same between the true floors of the two poses (what
 a perfect floor detector gives: the profile's own limit). The profile is in metres
-(``profile_m``, capped at 5 m); the same with ``_rows`` for SPEC §4's rows.
+(``profile_m``, capped at 5 m); the same with ``_rows`` for docs/design.md §4's rows.
 """
 
 from __future__ import annotations
@@ -124,7 +124,7 @@ def _error(mask: np.ndarray, truth: np.ndarray, below: int) -> float:
 
 
 def _profiles(mask: np.ndarray, distance: np.ndarray) -> dict[str, tuple[np.ndarray, float]]:
-    """The local space profile in metres (capped at ``CAP_M``) and in rows (SPEC §4), each
+    """The local space profile in metres (capped at ``CAP_M``) and in rows (docs/design.md §4), each
     with its largest possible bin value."""
     rows = float(np.count_nonzero(np.isfinite(distance)))
     return {"m": (profile_m(mask, distance, CAP_M), CAP_M), "rows": (profile(mask), rows)}

@@ -1,7 +1,7 @@
 """``placecell-eval recognise --reference A.png B.png --images X.png ...
 [--mirror auto|CX,CY,R_IN,R_OUT] [--json] [--plots DIR]``
 
-For people with a real mirror camera: learn a landmark set by static selection (SPEC §3.1)
+For people with a real mirror camera: learn a landmark set by static selection (docs/design.md §3)
 from two raw reference images taken at the same spot, and print its LRP (§3.4) in each
 further image. The raw images are unwarped with the mirror geometry found by
 detect-mirror (``auto``, from the first reference image) or given; an uncalibrated real

@@ -1,5 +1,5 @@
 """``placecell-eval recognition-range``: the area around a place's reference pose where
-its landmark set is still recognised (SPEC §3.2: selection matters; thesis §4.3).
+its landmark set is still recognised (docs/design.md §3: selection matters; thesis §4.3).
 
 For each place (the centre of a generated cluttered room, one world seed each) the set
 chosen by Turn Back and Look and the 16 best of static selection alone are learned at the

@@ -1,5 +1,5 @@
 """``placecell-eval robustness``: landmark sets under changed light and occlusion
-(SPEC §3.4; issue: visual landmarks, point 3).
+(docs/design.md §3; issue: visual landmarks, point 3).
 
 Places are learned by Turn Back and Look along the office corridor. At each reference
 pose the LRP of its own set is measured under illumination gain 0.5 and 1.5; and with a

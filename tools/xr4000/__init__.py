@@ -1,1 +1,1 @@
-"""The XR4000 base-controller emulator (the controller side of SPEC §12)."""
+"""The XR4000 base-controller emulator (the controller side of docs/design.md §12)."""
