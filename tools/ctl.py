@@ -287,6 +287,8 @@ def cmd_map(args: argparse.Namespace) -> int:
                       f"space profile, {_count(info['lookalike_pairs'], 'look-alike pair')} "
                       "with features")
             return EXIT_OK
+        if args.map_command == "plot":
+            return _plot(args)
         if args.map_command == "export":
             with MapStore.open(args.file, None, readonly=True) as store:
                 n = export_map(store, args.folder)
@@ -303,6 +305,55 @@ def cmd_map(args: argparse.Namespace) -> int:
         else:
             print(f"placecellctl: {e}", file=sys.stderr)
         return EXIT_REFUSED
+
+
+def _live_path(args: argparse.Namespace) -> list[dict[str, float]]:
+    """The robot's poses in the `map` frame, as the daemon publishes them over
+    ``--duration`` seconds."""
+    session, robot = open_client(args)
+    poses: queue.Queue[dict[str, float]] = queue.Queue()
+
+    def on_pose(sample: Any) -> None:
+        with contextlib.suppress(ValueError, KeyError, TypeError):
+            where = zenoh_link.decode(sample.payload.to_bytes())["map"]
+            if where is not None:
+                poses.put(where)
+
+    subscriber = session.declare_subscriber(zenoh_link.key(robot, "pose"), on_pose)
+    try:
+        time.sleep(args.duration)  # the path is what the robot does in this window
+    finally:
+        subscriber.undeclare()
+        session.close()
+    return list(poses.queue)
+
+
+def _plot(args: argparse.Namespace) -> int:
+    """``map plot``: the map file drawn (design §6), with the robot's pose and recent
+    path from the running daemon with --live."""
+    from daemon.store.sqlite_store import MapStore
+    from kernel.se2 import SE2
+    from tools import mapplot
+
+    with MapStore.open(args.file, None, readonly=True) as store:
+        graph = store.load()
+    path = _live_path(args) if args.live else []
+    pose = SE2(path[-1]["x"], path[-1]["y"], path[-1]["yaw"]) if path else None
+    picture = mapplot.draw_map(graph, [(p["x"], p["y"]) for p in path], pose,
+                               title=f"{Path(args.file).name}: "
+                                     f"{_count(len(graph), 'place')}")
+    try:
+        mapplot.write(picture, Path(args.out))
+    except (OSError, ValueError) as e:
+        print(f"placecellctl: {e}", file=sys.stderr)
+        return 2
+    note = "" if not args.live else (
+        f", the robot's last {_count(len(path), 'pose')}" if path
+        else f"; no pose in the map frame heard in {args.duration:g} s")
+    _done(args, f"drew {_count(len(graph), 'place')} to {args.out}{note}",
+          {"file": str(args.file), "out": str(args.out), "places": len(graph),
+           "poses": len(path)})
+    return EXIT_OK
 
 
 def _done(args: argparse.Namespace, text: str, as_json: dict[str, Any]) -> None:
@@ -629,6 +680,15 @@ def make_parser() -> argparse.ArgumentParser:
     msub = p.add_subparsers(dest="map_command", required=True)
     m = msub.add_parser("info", help="what a map file holds (checks every place)")
     m.add_argument("file")
+    m.add_argument("--json", action="store_true")
+    m = msub.add_parser("plot", help="a picture of the map: places, transitions, segments "
+                        "on a metric grid (with --live: the robot's pose and path)")
+    m.add_argument("file")
+    m.add_argument("--out", required=True, help="the picture: .svg or .png")
+    m.add_argument("--live", action="store_true",
+                   help="add the robot's pose and recent path from the running daemon")
+    m.add_argument("--duration", type=float, default=5.0,
+                   help="seconds of the robot's path to collect with --live")
     m.add_argument("--json", action="store_true")
     m = msub.add_parser("export", help="places and transitions to a folder (JSON, PNGs)")
     m.add_argument("file")
