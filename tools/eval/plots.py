@@ -71,8 +71,24 @@ def grid(path: Path, values: np.ndarray, marked: np.ndarray, *, title: str, lo: 
                 cv2.rectangle(img, top_left, bottom_right, (255, 255, 255), 2)
     centre = (PAD + (cols // 2) * cell + cell // 2, PAD + (rows - 1 - rows // 2) * cell + cell // 2)
     cv2.drawMarker(img, centre, (0, 0, 255), cv2.MARKER_CROSS, cell, 2)
+    # Axes in metres from the place's reference (the cross), ticks on whole steps.
+    step = _tick_step(max(rows, cols) * cell_m / 2)
+    for axis, n in (("x", cols), ("y", rows)):
+        half = n // 2
+        for k in range(-half, n - half):
+            offset = k * cell_m
+            if abs(offset / step - round(offset / step)) > 1e-6:
+                continue
+            if axis == "x":
+                at = (PAD + (k + half) * cell + cell // 2 - 10, PAD + rows * cell + 16)
+            else:
+                at = (PAD - 38, PAD + (rows - 1 - (k + half)) * cell + cell // 2 + 4)
+            cv2.putText(img, f"{offset:g}", at, FONT, 0.4, INK, 1, cv2.LINE_AA)
+    cv2.putText(img, "x (m) from the place", (SIZE // 2 - 70, PAD + rows * cell + 32), FONT,
+                0.45, INK, 1, cv2.LINE_AA)
+    cv2.putText(img, "y (m)", (8, PAD - 8), FONT, 0.45, INK, 1, cv2.LINE_AA)
     cv2.putText(img, f"LRP {lo:.2f} (dark) .. {hi:.2f} (yellow); white: recognised; "
-                f"cell {cell_m:g} m", (PAD, SIZE - 20), FONT, 0.4, INK, 1, cv2.LINE_AA)
+                f"cell {cell_m:g} m", (PAD, SIZE - 5), FONT, 0.4, INK, 1, cv2.LINE_AA)
     _write(path, img)
 
 
@@ -100,13 +116,28 @@ def paths(path: Path, tracks: dict[str, np.ndarray], *, title: str,
         colour = PALETTE[(k + len(tracks)) % len(PALETTE)]
         for x, y in t:
             cv2.circle(img, px(x, y), 1, colour, -1)
-        cv2.putText(img, name, (PAD, 50 + 16 * (k + len(tracks))), FONT, 0.4, colour, 1)
+        cv2.putText(img, name, (PAD + 6, PAD + 16 * (k + len(tracks) + 1)), FONT, 0.4, colour,
+                    1)
     for k, (name, t) in enumerate(tracks.items()):
         colour = PALETTE[k % len(PALETTE)]
         pts = np.array([px(x, y) for x, y in t], np.int32).reshape(-1, 1, 2)
         cv2.polylines(img, [pts], False, colour, 1, cv2.LINE_AA)
-        cv2.putText(img, name, (PAD, 50 + 16 * k), FONT, 0.4, colour, 1, cv2.LINE_AA)
-    cv2.putText(img, f"{span:.2f} m across", (PAD, SIZE - 20), FONT, 0.4, INK, 1, cv2.LINE_AA)
+        cv2.putText(img, name, (PAD + 6, PAD + 16 * (k + 1)), FONT, 0.4, colour, 1,
+                    cv2.LINE_AA)
+    step = _tick_step(span)
+    x_lo, x_hi = centre[0] - SIZE / 2 / scale, centre[0] + SIZE / 2 / scale
+    y_lo, y_hi = centre[1] - SIZE / 2 / scale, centre[1] + SIZE / 2 / scale
+    for t in np.arange(np.ceil(x_lo / step) * step, x_hi, step):
+        if PAD <= px(t, 0)[0] <= SIZE - PAD:
+            cv2.putText(img, f"{t:g}", (px(t, 0)[0] - 8, SIZE - PAD + 18), FONT, 0.4, INK, 1)
+            cv2.line(img, (px(t, 0)[0], SIZE - PAD), (px(t, 0)[0], SIZE - PAD + 5), INK, 1)
+    for t in np.arange(np.ceil(y_lo / step) * step, y_hi, step):
+        if PAD <= px(0, t)[1] <= SIZE - PAD:
+            cv2.putText(img, f"{t:g}", (PAD - 40, px(0, t)[1] + 4), FONT, 0.4, INK, 1)
+            cv2.line(img, (PAD - 5, px(0, t)[1]), (PAD, px(0, t)[1]), INK, 1)
+    cv2.rectangle(img, (PAD, PAD), (SIZE - PAD, SIZE - PAD), INK, 1)
+    cv2.putText(img, "x (m)", (SIZE // 2 - 20, SIZE - 15), FONT, 0.5, INK, 1, cv2.LINE_AA)
+    cv2.putText(img, "y (m)", (8, PAD - 8), FONT, 0.5, INK, 1, cv2.LINE_AA)
     _write(path, img)
 
 
