@@ -18,7 +18,7 @@ from daemon.vision.selection import select_static
 from daemon.vision.unwarp import Unwarper
 from hal.registry import HalContext, create_base, create_camera
 from hal.sim.factory import shared_sim_robot
-from kernel.errors import LearningAbortedError, LearningError
+from kernel.errors import CommandRejectedError, LearningAbortedError, LearningError
 from tests.daemon_harness import REPO
 from tests.sim_helpers import lockstep_config, with_sections
 
@@ -35,9 +35,29 @@ def _devices(config):  # type: ignore[no-untyped-def]
 
 def test_cross_is_out_and_back_along_both_axes() -> None:
     legs = cross_legs(0.5)
-    assert [(dx, dy) for _, dx, dy in legs] == [
-        (0.5, 0.0), (-0.5, 0.0), (-0.5, 0.0), (0.5, 0.0),
-        (0.0, 0.5), (0.0, -0.5), (0.0, -0.5), (0.0, 0.5)]
+    assert [(leg.dx, leg.dy, leg.dyaw) for leg in legs] == [
+        (0.5, 0.0, 0.0), (-0.5, 0.0, 0.0), (-0.5, 0.0, 0.0), (0.5, 0.0, 0.0),
+        (0.0, 0.5, 0.0), (0.0, -0.5, 0.0), (0.0, -0.5, 0.0), (0.0, 0.5, 0.0)]
+    assert [leg.out for leg in legs] == [True, False] * 4
+
+
+def test_a_differential_cross_turns_to_drive_the_side_arms() -> None:
+    """The same five points, reached along the heading with quarter turns in place: each
+    leg's end, composed in the reference frame, is the holonomic cross's."""
+    legs = cross_legs(0.5, "differential")
+    assert all(leg.dy == 0.0 and (leg.dx == 0.0 or leg.dyaw == 0.0) for leg in legs)
+    assert [leg.name for leg in legs if not leg.out and leg.name.startswith("turn")] == [
+        "turn to +y", "turn back"]
+    x = y = yaw = 0.0
+    points = []
+    for leg in legs:
+        x += leg.dx * math.cos(yaw)
+        y += leg.dx * math.sin(yaw)
+        yaw += leg.dyaw
+        if leg.out:
+            points.append((round(x, 9), round(y, 9)))
+    assert points == [(0.5, 0.0), (-0.5, 0.0), (0.0, 0.5), (0.0, -0.5)]
+    assert (round(x, 9), round(y, 9), round(yaw, 9)) == (0.0, 0.0, 0.0)  # back as it began
 
 
 def test_zoom_of_a_wall_landmark_seen_from_the_cross() -> None:
@@ -89,6 +109,37 @@ def test_learning_in_the_artificial_corridor() -> None:
     assert side and all(abs(lm.depth - 0.7) < 0.1 for lm in side)
     assert all(lm.covariance.shape == (2, 2) and lm.covariance[0, 0] > 0
                for lm in landmarks.landmarks)
+
+
+def test_a_differential_base_refuses_sideways_motion() -> None:
+    config = with_sections(lockstep_config(world=CORRIDOR, start_pose=[0.0, 0.0, 0.0]),
+                           base_sim={"kinematics": "differential"})
+    _, base, robot = _devices(config)
+    assert base.info.kinematics == "differential"
+    for dx, dy, dyaw in ((0.0, 0.5, 0.0), (0.5, 0.0, 0.3)):
+        with pytest.raises(CommandRejectedError, match="differential"):
+            base.move_relative(dx, dy, dyaw, 0.2)
+    with pytest.raises(CommandRejectedError, match="sideways"):
+        base.velocity(0.0, 0.1, 0.0)
+    assert robot.true_pose() == (0.0, 0.0, 0.0)
+
+
+def test_learning_on_a_differential_base_in_the_artificial_corridor() -> None:
+    """The cross driven with quarter turns: the same markers 0.7 m across the corridor get
+    their depths, and the robot ends at its reference pose, heading and all."""
+    config = with_sections(lockstep_config(world=CORRIDOR, start_pose=[0.0, 0.0, 0.0]),
+                           base_sim={"kinematics": "differential"})
+    camera, base, robot = _devices(config)
+    seen: list[Progress] = []
+    landmarks = run_tbl(camera, base, Unwarper(config.mirror, config.panorama), TblSettings(),
+                        progress=seen.append).result()
+    assert len(landmarks.landmarks) == 16
+    assert {"turn to +y", "+y", "turn back"} <= {p.phase for p in seen}
+    x, y, yaw = robot.true_pose()
+    assert math.hypot(x, y) < 1e-6 and abs(yaw) < 1e-6
+    side = [lm for lm in landmarks.landmarks if abs(abs(lm.bearing) - math.pi / 2) < 0.2]
+    assert side and all(abs(lm.depth - 0.7) < 0.1 for lm in side), [
+        round(lm.depth, 3) for lm in side]
 
 
 def test_given_candidates_are_tracked_instead_of_static_selection() -> None:

@@ -33,6 +33,9 @@ class TblSettings:
                                       "must have been driven to this (or half the extent, if "
                                       "less) by its odometry, else learning fails: a place is "
                                       "never learned from a path it did not drive")
+    turn_tolerance_rad: float = setting(0.1, gt=0.0, le=1.0, doc="likewise for the heading "
+                                        "each leg must end with (a differential base's turns; "
+                                        "0 for the others)")
     search_cols: int = setting(12, ge=2, le=64, doc="tracking window half-width (columns)")
     search_rows: int = setting(6, ge=1, le=32, doc="tracking window half-height (rows)")
     initial_depth_m: float = setting(2.5, gt=0.0, le=50.0, doc="EKF prior depth (§4.6)")

@@ -61,12 +61,38 @@ class Progress:
     fraction: float  # 0..1 of the whole cross
 
 
-def cross_legs(extent: float) -> list[tuple[str, float, float]]:
-    """The cross: out and back along +x, −x, +y, −y, heading kept (§4.3)."""
+@dataclass(frozen=True)
+class Leg:
+    """One move of the cross, in the robot's frame at its start: out along an arm, back
+    to the reference, or a turn in place (a differential base's way to the side arms)."""
+
+    name: str
+    dx: float
+    dy: float
+    dyaw: float = 0.0
+
+    @property
+    def out(self) -> bool:
+        return not self.name.startswith(("back", "turn"))
+
+
+def cross_legs(extent: float, kinematics: str = "holonomic") -> list[Leg]:
+    """The cross (§4.3): out and back along +x, −x, +y, −y of the reference pose. A
+    holonomic base keeps its heading and moves sideways for ±y; a differential base turns
+    a quarter left in place, drives the same arms along its new heading, and turns back,
+    so the landmarks are seen from the same five points (the turns add no parallax: the
+    bearings shift by the turn, which odometry predicts)."""
     legs = []
-    for name, dx, dy in (("+x", extent, 0.0), ("-x", -extent, 0.0), ("+y", 0.0, extent),
-                         ("-y", 0.0, -extent)):
-        legs += [(name, dx, dy), (f"back from {name}", -dx, -dy)]
+    for name, dx, dy in (("+x", extent, 0.0), ("-x", -extent, 0.0)):
+        legs += [Leg(name, dx, dy), Leg(f"back from {name}", -dx, -dy)]
+    if kinematics == "differential":
+        legs.append(Leg("turn to +y", 0.0, 0.0, math.pi / 2))
+        for name, dx in (("+y", extent), ("-y", -extent)):
+            legs += [Leg(name, dx, 0.0), Leg(f"back from {name}", -dx, 0.0)]
+        legs.append(Leg("turn back", 0.0, 0.0, -math.pi / 2))
+    else:
+        for name, dy in (("+y", extent), ("-y", -extent)):
+            legs += [Leg(name, 0.0, dy), Leg(f"back from {name}", 0.0, -dy)]
     return legs
 
 
@@ -76,9 +102,11 @@ CandidateChooser = Callable[[np.ndarray, np.ndarray, int], LandmarkSet]
 
 class TurnBackAndLook:
     def __init__(self, settings: TblSettings, reference_1: np.ndarray, reference_2: np.ndarray,
-                 margin: int, start: Odometry, choose: CandidateChooser | None = None) -> None:
+                 margin: int, start: Odometry, choose: CandidateChooser | None = None,
+                 kinematics: str = "holonomic") -> None:
         """``choose``: the candidates to track; static selection (§4.2) unless given (the
-        thesis identified its artificial markers by hand to measure depth, §4.6.4)."""
+        thesis identified its artificial markers by hand to measure depth, §4.6.4);
+        ``kinematics``: the base's (cross_legs)."""
         self.settings = settings
         self.margin = margin
         self.reference_panorama = reference_1  # the place's reference view (design §6)
@@ -110,7 +138,7 @@ class TurnBackAndLook:
         self.recognition_margin_sum = np.zeros(n)
         self.recognition_margin_frames = 0
         self.frames = 0
-        self.legs = cross_legs(settings.extent_m)
+        self.legs = cross_legs(settings.extent_m, kinematics)
         self.leg = 0
         # Grey views half-way out along each arm of the cross: the place seen a little off
         # its reference (disambiguating features must survive that, design §5; from the
@@ -127,16 +155,16 @@ class TurnBackAndLook:
     def progress(self) -> Progress:
         if self.done:
             return Progress("done", 1.0)
-        return Progress(self.legs[self.leg][0], self.leg / len(self.legs))
+        return Progress(self.legs[self.leg].name, self.leg / len(self.legs))
 
     def next_command(self) -> MoveCommand | None:
         """The move to command now (once per leg), or None while one is under way."""
         if self.done or self._commanded:
             return None
-        _, dx, dy = self.legs[self.leg]
+        leg = self.legs[self.leg]
         self._commanded = True
         self._leg_start = self._last_odometry  # the robot at rest, before it moves
-        return MoveCommand(dx, dy, 0.0, self.settings.speed_m_s)
+        return MoveCommand(leg.dx, leg.dy, leg.dyaw, self.settings.speed_m_s)
 
     def on_frame(self, panorama: np.ndarray, odometry: Odometry, move_done: bool) -> Progress:
         """One frame during the cross: odometry at the frame's stamp, and whether the move
@@ -164,8 +192,9 @@ class TurnBackAndLook:
             self.recognition_margin_frames += 1
         self.rows = result.rows
         self.frames += 1
-        out = not self.done and not self.legs[self.leg][0].startswith("back")
-        if out and self._commanded and len(self.views) == self.leg // 2 and \
+        out = not self.done and self.legs[self.leg].out
+        arm = sum(leg.out for leg in self.legs[:self.leg])  # this out leg's arm
+        if out and self._commanded and len(self.views) == arm and \
                 math.hypot(pose[0], pose[1]) >= self.settings.extent_m / 2:
             self.views.append(grey)  # half-way out along this arm
         if move_done and self._commanded:
@@ -179,17 +208,21 @@ class TurnBackAndLook:
         within ``path_tolerance_m`` (at most half the extent) of the commanded move. A
         move lost or cut short on the link, or a stale "done", would otherwise give a
         place learned from a path the robot did not drive (issue 32)."""
-        name, dx, dy = self.legs[self.leg]
+        leg = self.legs[self.leg]
         a = self._leg_start
         c, s = math.cos(a.yaw), math.sin(a.yaw)
         gx, gy = odometry.x - a.x, odometry.y - a.y
         u, v = c * gx + s * gy, -s * gx + c * gy
+        turned = math.remainder(odometry.yaw - a.yaw, 2 * math.pi)
         tolerance = min(self.settings.path_tolerance_m, self.settings.extent_m / 2)
-        if math.hypot(u - dx, v - dy) > tolerance:
+        if math.hypot(u - leg.dx, v - leg.dy) > tolerance or \
+                abs(turned - leg.dyaw) > self.settings.turn_tolerance_rad:
             raise LearningError(
-                f"leg {name}: the base called the move done, but its odometry shows "
-                f"({u:+.3f}, {v:+.3f}) m driven of ({dx:+.3f}, {dy:+.3f}) m commanded: the "
-                "cross was not driven as planned, so no place is learned from it")
+                f"leg {leg.name}: the base called the move done, but its odometry shows "
+                f"({u:+.3f}, {v:+.3f}) m and {math.degrees(turned):+.1f} deg driven of "
+                f"({leg.dx:+.3f}, {leg.dy:+.3f}) m and {math.degrees(leg.dyaw):+.1f} deg "
+                "commanded: the cross was not driven as planned, so no place is learned "
+                "from it")
 
     def _predict(self, odometry: Odometry) -> None:
         a, b = self._last_odometry, odometry

@@ -155,7 +155,7 @@ def drive_tbl(sensors: Sensors, mover: Mover, unwarper: Unwarper, settings: TblS
     f1, odo = sensors.frame()
     f2, _ = sensors.frame()
     tbl = TurnBackAndLook(settings, unwarper.unwarp(f1.image), unwarper.unwarp(f2.image),
-                          margin, odo, choose)
+                          margin, odo, choose, kinematics=mover.info.kinematics)
     if on_start is not None:
         on_start(odo)
     frames_this_leg = 0

@@ -39,6 +39,10 @@ class BaseInfo:
     # lives on in the process); False when it may start from anywhere (a base power-cycled
     # while the link was down, a replay started again).
     odometry_kept_on_reopen: bool = False
+    # "holonomic": moves along any direction of the robot's frame (the XR4000);
+    # "differential": along its heading or turning in place only (Turn Back and Look then
+    # drives its cross with turns, design §3).
+    kinematics: str = "holonomic"
 
 
 @runtime_checkable

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 from kernel.settings import setting
 
@@ -28,6 +29,9 @@ class SimBaseSettings:
         0.003, ge=0.0, le=1.0, doc="heading noise per sqrt(metre) travelled"
     )
     can_move: bool = setting(True, doc="whether motion commands are accepted")
+    kinematics: Literal["holonomic", "differential"] = setting(
+        "holonomic", doc="holonomic: moves in any direction; differential: along the "
+        "heading or turning in place only (sideways motion is refused)")
 
 
 @dataclass(frozen=True)

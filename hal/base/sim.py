@@ -27,8 +27,9 @@ class SimBase:
 
     @property
     def info(self) -> BaseInfo:
-        return BaseInfo("sim", "simulated holonomic base", self._settings.can_move,
-                        self._settings.odometry_rate_hz, odometry_kept_on_reopen=True)
+        return BaseInfo("sim", f"simulated {self._settings.kinematics} base",
+                        self._settings.can_move, self._settings.odometry_rate_hz,
+                        odometry_kept_on_reopen=True, kinematics=self._settings.kinematics)
 
     def _open_robot(self) -> SimRobot:
         if self._robot is None:

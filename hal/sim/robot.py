@@ -264,6 +264,10 @@ class SimRobot:
             raise CommandRejectedError("the simulated base is configured with can_move = false")
         if speed <= 0 or not all(map(math.isfinite, (dx, dy, dyaw, speed))):
             raise CommandRejectedError(f"invalid move ({dx}, {dy}, {dyaw}) at {speed} m/s")
+        if self.base.kinematics == "differential" and (dy != 0.0 or (dx != 0.0 and dyaw != 0.0)):
+            raise CommandRejectedError(
+                f"move ({dx}, {dy}, {dyaw}): a differential base drives along its heading "
+                "or turns in place, one at a time")
         with self._lock:
             x, y, yaw = self._pose
             goal = (x + dx * math.cos(yaw) - dy * math.sin(yaw),
@@ -277,6 +281,9 @@ class SimRobot:
     def velocity(self, vx: float, vy: float, w: float) -> None:
         if not self.base.can_move:
             raise CommandRejectedError("the simulated base is configured with can_move = false")
+        if self.base.kinematics == "differential" and vy != 0.0:
+            raise CommandRejectedError(f"velocity vy = {vy}: a differential base has no "
+                                       "sideways motion")
         with self._lock:
             self._commanded = True
             self._move_done_at_ns = None

@@ -32,6 +32,7 @@ from daemon.vision.landmarks import centre_bearing
 from hal.sim.world import load_world
 from kernel.errors import PlacecellError
 from tools.eval import plots
+from tools.eval.lockstep import with_kinematics
 from tools.eval.markers import markers_in_view
 from tools.eval.places import learn
 from tools.eval.truth import landmark_depth
@@ -50,6 +51,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "hand as in the thesis, instead of TBL's own choice")
     p.add_argument("--places", type=int, default=10,
                    help="places to learn (one world seed each; corridor: positions along it)")
+    p.add_argument("--kinematics", choices=["holonomic", "differential"], default="holonomic",
+                   help="the simulated base: a differential one drives the cross with turns")
 
 
 def _places(args: argparse.Namespace) -> list[tuple[str, tuple[float, float, float]]]:
@@ -71,7 +74,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     for world, pose in _places(args):
         choose = markers_in_view(load_world(world), pose, panorama, MARKER_REACH_M) \
             if args.hand_markers else None
-        place = learn(world, pose, args.seed, choose=choose)
+        place = learn(world, pose, args.seed, choose=choose,
+                      config=with_kinematics(load(None), args.kinematics))
         landmarks, reference = place.tbl, place.pose
         for lm in landmarks.landmarks:
             # The true landmark: the surface point seen at the template's centre pixel in
@@ -101,6 +105,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "world": {"kind": world_kind,
                   "seed": args.world_seed},
         "config": {"places": args.places, "hand_markers": args.hand_markers,
+                   "kinematics": args.kinematics,
                    "tbl": dataclasses.asdict(load(None).tbl)},
         "metrics": {
             "median_error_m": round(float(np.median(errors)), 4),

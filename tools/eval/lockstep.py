@@ -65,16 +65,28 @@ def localisation_settings(default: LocalisationSettings, args: argparse.Namespac
     return build(LocalisationSettings, data, "localisation")
 
 
+def with_kinematics(cfg: PlacecellConfig, kinematics: str) -> PlacecellConfig:
+    """The simulated base holonomic or differential (Turn Back and Look drives its cross
+    with turns on the latter, design §3)."""
+    if kinematics not in ("holonomic", "differential"):
+        raise ValueError(f"kinematics {kinematics!r}: holonomic or differential")
+    sim_base = dataclasses.replace(cfg.base.sim, kinematics=kinematics)  # type: ignore[arg-type]
+    return dataclasses.replace(cfg, base=dataclasses.replace(cfg.base, sim=sim_base))
+
+
 def lockstep_config(seed: int, scenario: str = "", world: str = "",
                     start_pose: tuple[float, float, float] | None = None,
-                    localisation: LocalisationSettings | None = None) -> PlacecellConfig:
+                    localisation: LocalisationSettings | None = None,
+                    kinematics: str = "holonomic") -> PlacecellConfig:
     base = load(None)
     sim = dataclasses.replace(base.sim, realtime=False, seed=seed, scenario=scenario)
     if world:
         sim = dataclasses.replace(sim, world=world)
     if start_pose is not None:
         sim = dataclasses.replace(sim, start_pose=list(start_pose))
-    return dataclasses.replace(base, sim=sim, localisation=localisation or base.localisation)
+    return with_kinematics(dataclasses.replace(base, sim=sim,
+                                               localisation=localisation or base.localisation),
+                           kinematics)
 
 
 class Run:
@@ -144,8 +156,8 @@ class Run:
 
     def drive_cross(self, extent: float, speed: float) -> Iterator[Belief]:
         """The Turn Back and Look cross (§4.3) from here, heading kept."""
-        for _, dx, dy in cross_legs(extent):
-            yield from self.drive(dx, dy, 0.0, speed)
+        for leg in cross_legs(extent, self.base.info.kinematics):
+            yield from self.drive(leg.dx, leg.dy, leg.dyaw, speed)
 
     def learn(self, label: str = "") -> Place:
         """Turn Back and Look here with the daemon's loop; the place is stored with its

@@ -48,6 +48,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--misassociate", type=int, default=0,
                    help="landmarks whose map bearing is 3-6 degrees off")
     p.add_argument("--crosses", type=int, default=2, help="times the cross is driven")
+    p.add_argument("--kinematics", choices=["holonomic", "differential"], default="holonomic",
+                   help="the simulated base: a differential one drives the cross with turns")
 
 
 def occluder(width: int, height: int, cx: float, cy: float, degrees: float,
@@ -82,7 +84,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     base = load(None)
     settings = localisation_settings(base.localisation, args)
     cfg = lockstep_config(args.seed, world=world, start_pose=load_world(world).start_pose,
-                          localisation=settings)
+                          localisation=settings, kinematics=args.kinematics)
     rng = np.random.default_rng(args.seed + 1000)
     m, cam = cfg.mirror, cfg.camera.sim
     frame_filter = occluder(cam.image_width, cam.image_height, m.center_x_px, m.center_y_px,
@@ -124,7 +126,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "world": {"kind": args.world_kind, "seed": args.world_seed},
         "config": {"sensor_model": args.sensor_model, "occlude_deg": args.occlude_deg,
                    "misassociate": args.misassociate, "crosses": args.crosses,
-                   "particles": settings.particles},
+                   "particles": settings.particles, "kinematics": args.kinematics},
         "metrics": {
             "mean_error_m": round(float(e.mean()), 4),
             "p95_error_m": round(float(np.percentile(e, 95)), 4),
