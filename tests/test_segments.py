@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import threading
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,7 @@ from tests.api_schema import check
 from tests.conftest import OfficeMap
 from tests.daemon_harness import client_session, running_daemon, wait_for, write_config
 from tests.map_fixtures import synthetic_place
+from tools.eval.lockstep import Run, lockstep_config
 
 
 def _link(a: int, b: int) -> Transition:
@@ -124,3 +126,49 @@ def test_kidnapped_into_unmapped_space_a_segment_of_its_own_is_learned(
         finally:
             session.close()
         assert proc.poll() is None
+
+
+def test_driven_back_out_of_view_the_segments_are_joined_by_a_measured_transition(
+        tmp_path: Path, office_map: OfficeMap) -> None:
+    """A place d learned at x = 11 m in unmapped space (a segment of its own: no link to
+    the corridor's a, b, c at x = 3-6 m); the robot drives back towards c out of every
+    place's view, is lost there, and relocalised in c: the transition d -> c
+    is measured from the last reliable estimate in d, the odometry since and the estimate
+    in c once relocalisation has confirmed it (lock-step, the daemon's localiser), close
+    to the truth; a candidate on the way that is not confirmed measures nothing."""
+    refs = office_map(tmp_path / "map.db")
+    with Run(lockstep_config(1, start_pose=(11.0, 10.0, 0.0)),
+             map_path=tmp_path / "map.db") as run:
+        run.localiser = run.restart_localiser()
+        for _ in range(5):
+            run.step()
+        run.mapper.odometry_restarted()  # unmapped space: no link to the last place
+        d = run.learn("d")
+        assert not run.mapper.graph.neighbours(d.id)  # its own segment
+        closed: list[Transition] = []
+        lost: list[str] = []
+        for _ in run.drive(0.0, 0.0, math.pi, 0.3):  # about, and along the corridor
+            pass
+        for belief in run.drive(5.0, 0.0, 0.0, 0.3):
+            if belief.event is not None and belief.event.kind == "lost":
+                lost.append(belief.event.how)
+            if belief.closed_transition is not None:
+                closed.append(belief.closed_transition)
+        for _ in range(60):  # at rest near c until the estimate in c is reliable
+            if closed:
+                break
+            belief = run.step()[1]
+            if belief.closed_transition is not None:
+                closed.append(belief.closed_transition)
+        assert lost, "never lost on the way"
+        c = next(p.id for p in run.mapper.graph.places if p.label == "c")
+        assert [(t.from_id, t.to_id) for t in closed] == [(d.id, c)], closed
+        truth = run.references[d.id].between(refs["c"])  # T_d_c, the reference poses
+        T = closed[0].T_from_to
+        error = np.array([T.mean.x - truth.x, T.mean.y - truth.y,
+                          math.remainder(T.mean.yaw - truth.yaw, 2 * math.pi)])
+        # Five metres of odometry (the simulated base drifts 0.016 rad/m in heading):
+        # within 0.3 m and 0.12 rad, and within what its covariance says (3 sigma).
+        assert math.hypot(*error[:2]) < 0.3 and abs(error[2]) < 0.12, (T.mean, truth)
+        assert all(abs(e) <= 3 * math.sqrt(v) for e, v in
+                   zip(error, np.diag(T.covariance), strict=True)), (error, T.covariance)

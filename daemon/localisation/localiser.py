@@ -114,6 +114,22 @@ class PoseRequest:
     confirm: str | None = None  # None: the operator knows; else how the pose came (resumed)
 
 
+def _near_reference(tracker: PlaceTracker | None, within_m: float) -> bool:
+    """The estimate stands within ``within_m`` of its place's reference (or is unknown)."""
+    if tracker is None or tracker.estimate is None:
+        return True
+    return math.hypot(tracker.estimate.pose[0], tracker.estimate.pose[1]) < within_m
+
+
+@dataclasses.dataclass(frozen=True)
+class Fix:
+    """A reliable estimate while tracking (place, T_place_robot) and the odometry since."""
+
+    place_id: int
+    T_place_robot: UncertainSE2
+    odometry: OdometryChain
+
+
 class Localiser:
     """Frames and odometry in, beliefs out."""
 
@@ -153,6 +169,9 @@ class Localiser:
         self.switcher = PlaceSwitcher(self.settings)
         self._pose_request: PoseRequest | None = None
         self._closure: CycleClosure | None = None
+        # The last reliable estimate while tracking and the odometry since: after a blind
+        # loss, the start of a transition to the place relocalisation finds (_bridge).
+        self._fix: Fix | None = None
         # Look-alike places' disambiguating features (design §5), by the pair's ids.
         self._features: dict[frozenset[int], PairFeatures] = {}
         self._ambiguous_frames = 0  # the search's pick ambiguous this many frames in a row
@@ -295,10 +314,9 @@ class Localiser:
 
     def add_odometry(self, samples: list[Odometry]) -> None:
         self.odometry.extend(samples)
-        closure = self._closure
-        if closure is not None:
+        for chain in (c.odometry for c in (self._closure, self._fix) if c is not None):
             for sample in samples:
-                closure.odometry.add(sample)
+                chain.add(sample)
 
     # ------------------------------------------------------------------ per frame
     def process_frame(self, frame: Frame) -> Belief:
@@ -350,8 +368,15 @@ class Localiser:
             scores, switched_from = self._recognise(prepare(), grey, odo)
         scores = _merged(scores, searched)
         if self._closure is not None and local is not None and self.tracker is not None \
-                and self.tracker.place.id == self._closure.to_id:
+                and self.tracker.place.id == self._closure.to_id \
+                and (self.mode == "track" or not self._closure.after_confirmation):
             closed = self._observe_closure(local)
+        if self.mode == "track" and local is not None and odo is not None \
+                and self.tracker is not None \
+                and reliable(local.estimate.covariance, local.confidence, self.settings):
+            self._fix = Fix(self.tracker.place.id,
+                            UncertainSE2(SE2.of(local.estimate.pose), local.estimate.covariance),
+                            OdometryChain(odo, self.odometry_noise))
         timings["recognition"] = (time.perf_counter() - t2) * 1e3
         t3 = time.perf_counter()
         recent, recent_lrp, decision, background = self._acquire(prepare, grey, odo)
@@ -458,6 +483,8 @@ class Localiser:
             event = LocalisationEvent("lost", current, self.loss.why if lost_now else
                                       f"another place led the search by "
                                       f"{s.search_margin} for {s.led_frames} frames")
+            if not lost_now or _near_reference(self.tracker, s.bridge_from_m):
+                self._fix = None  # lost where the place is in view: carried off? no bridge
             self.lead_watch.reset()
             leader = self._leader(grey, current, places)
             if leader is not None:
@@ -624,10 +651,26 @@ class Localiser:
         tracker = PlaceTracker(self._known[place_id].place, self.settings, self.model,
                                self.rng)
         tracker.start_anywhere(grey, self.settings.recovery_sigma_m)
-        self.tracker, self._closure = tracker, None
+        self.tracker, self._closure = tracker, self._bridge(place_id)
         self.mode, self._mode_frames, self._confirming = "confirm", 0, "global"
         self.loss.reset()
         self._ambiguous_frames = 0
+
+    def _bridge(self, place_id: int) -> CycleClosure | None:
+        """After a loss out of the last place's view, relocalisation's pick in a place
+        the map does not join to it: the transition between them, measured as a cycle's
+        is (last reliable estimate ∘ odometry since ∘ the new estimate⁻¹) once the new
+        estimate is reliable — how two segments are joined when the robot drove back
+        into mapped space out of view (design §6, issue 31). Only within ``bridge_max_m``
+        of odometry, on an unbroken run; a loss within ``bridge_from_m`` of the place's
+        reference, where it should be recognised (a kidnap), leaves no fix."""
+        fix, s = self._fix, self.settings  # kept: a rejected pick may be followed by another
+        if fix is None or fix.place_id == place_id or fix.odometry.broken \
+                or not 0 < fix.odometry.distance_m <= s.bridge_max_m \
+                or place_id in self._through_graph(fix.place_id):
+            return None
+        return CycleClosure(fix.place_id, place_id, fix.T_place_robot, fix.odometry, s,
+                            after_confirmation=True)
 
     def _recover(self, grey: np.ndarray, step: int) -> None:
         """§9.3.2 step 1: the particles around the estimate (σ recovery_local_sigma_m);

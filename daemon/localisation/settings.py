@@ -114,6 +114,16 @@ class LocalisationSettings:
     blind_m: float = setting(2.0, ge=0.0, le=1000.0, doc="odometry travel with no "
                              "evidence (fewer than evidence_landmarks usable from the "
                              "estimate: odometry alone) that is a loss too; 0: never")
+    bridge_max_m: float = setting(6.0, ge=0.0, le=100.0, doc="after a loss out of the "
+                                  "place's view (see bridge_from_m), a relocalisation into a "
+                                  "place the map does not join to the last one tracked, "
+                                  "within this odometry travel of the last reliable "
+                                  "estimate, measures the transition between them (segments "
+                                  "joined, design §6); 0: never")
+    bridge_from_m: float = setting(0.5, ge=0.0, le=100.0, doc="a loss nearer than this to "
+                                   "the place's reference, where the place should be "
+                                   "recognised, is a contradiction (carried off?): no "
+                                   "transition is measured from before it")
     recovery_local_sigma_m: float = setting(0.2, gt=0.0, le=5.0, doc="recovery step 1: "
                                             "particles redistributed this far around the "
                                             "estimate (§9.3.2)")
