@@ -26,7 +26,7 @@ _ROBOT_NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 # ROS 2 topic names: slash-separated tokens of letters, digits and '_', none starting with
 # a digit (the part of rcl's validation that needs no substitution).
 _TOPIC = re.compile(r"^/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*$")
-_ZID = re.compile(r"^[0-9a-f]{1,32}$")
+_ZID = re.compile(r"^[1-9a-f][0-9a-f]{0,31}$")  # zenoh's: hex, no leading zero
 _FRAME_ID = re.compile(r"^[A-Za-z_][A-Za-z0-9_/]{0,63}$")
 
 
@@ -52,12 +52,14 @@ class ZenohSettings:
                                "control and certificates: config/zenoh/robot.json5, "
                                "docs/security.md); the keys above override its mode "
                                "and endpoints")
-    id: str = setting("", doc="the daemon's zenoh id (1-32 hex digits); empty: derived "
-                      "from the robot name, as placecellctl expects (docs/security.md)")
+    id: str = setting("", doc="the daemon's zenoh id (1-32 hex digits, no leading 0); "
+                      "empty: derived from the robot name, as placecellctl expects "
+                      "(docs/security.md)")
 
     def __post_init__(self) -> None:
         if self.id and not _ZID.match(self.id):
-            raise ValueError(f"zenoh.id {self.id!r} is not 1-32 lowercase hex digits")
+            raise ValueError(f"zenoh.id {self.id!r} is not 1-32 lowercase hex digits "
+                             "without a leading zero")
 
 
 @dataclass(frozen=True)

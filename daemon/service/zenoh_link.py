@@ -35,7 +35,9 @@ def robot_zid(robot: str, configured: str = "") -> str:
     """The robot's zenoh id: ``[zenoh] id`` when set, else one derived from its name, so
     that placecellctl, reading the same configuration, knows which node may answer for
     the robot (docs/security.md: replies from any other node are dropped)."""
-    return configured or hashlib.sha256(f"placecell/{robot}".encode()).hexdigest()[:32]
+    # zenoh refuses an id with a leading zero ("Leading 0s are not valid").
+    derived = hashlib.sha256(f"placecell/{robot}".encode()).hexdigest()[:32].lstrip("0")
+    return configured or derived or "1"
 
 
 def make_config(mode: str, listen: list[str], connect: list[str],
