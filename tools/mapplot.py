@@ -31,6 +31,7 @@ INK, GRID = (40, 40, 40), (220, 220, 220)
 SCALE_PX_PER_M = 60.0
 MARGIN_PX = 70
 OTHER_SEGMENT_GAP_M = 2.0
+Pixel = tuple[float, float]
 
 
 @dataclass(frozen=True)
@@ -138,11 +139,18 @@ class _Frame:
         return (MARGIN_PX + (x - self.x0) * SCALE_PX_PER_M,
                 self.height - MARGIN_PX - (y - self.y0) * SCALE_PX_PER_M)
 
-    def grid(self) -> list[tuple[str, float]]:
+    def grid(self) -> list[tuple[Pixel, Pixel, Pixel, str]]:
+        """Each grid line in pixels (its two ends), where its tick label goes, and the
+        label: one geometry for both renderings."""
         step = _tick(max(self.x1 - self.x0, self.y1 - self.y0))
-        lines = [("x", v) for v in np.arange(math.ceil(self.x0 / step) * step, self.x1, step)]
-        return lines + [("y", v) for v in np.arange(math.ceil(self.y0 / step) * step, self.y1,
-                                                    step)]
+        out = []
+        for v in np.arange(math.ceil(self.x0 / step) * step, self.x1, step):
+            a, b = self.px(v, self.y0), self.px(v, self.y1)
+            out.append((a, b, (a[0] - 8, a[1] + 16), f"{v:g}"))
+        for v in np.arange(math.ceil(self.y0 / step) * step, self.y1, step):
+            a, b = self.px(self.x0, v), self.px(self.x1, v)
+            out.append((a, b, (a[0] - 40, a[1] + 4), f"{v:g}"))
+        return out
 
 
 def _legend(pic: Picture) -> list[tuple[str, tuple[int, int, int], str]]:
@@ -164,12 +172,10 @@ def to_svg(pic: Picture) -> str:
            f'data-scale-px-per-m="{SCALE_PX_PER_M}" data-x0="{f.x0:.4f}" '
            f'data-y0="{f.y0:.4f}" data-margin-px="{MARGIN_PX}" font-family="sans-serif">',
            f'<rect width="{f.width}" height="{f.height}" fill="white"/>']
-    for axis, v in f.grid():
-        a, b = (f.px(v, f.y0), f.px(v, f.y1)) if axis == "x" else (f.px(f.x0, v), f.px(f.x1, v))
+    for a, b, (lx, ly), label in f.grid():
         out.append(f'<line class="grid" x1="{a[0]:.1f}" y1="{a[1]:.1f}" x2="{b[0]:.1f}" '
                    f'y2="{b[1]:.1f}" stroke="{_hex(GRID)}"/>')
-        lx, ly = (a[0] - 8, a[1] + 16) if axis == "x" else (a[0] - 40, a[1] + 4)
-        out.append(f'<text class="tick" x="{lx:.1f}" y="{ly:.1f}" font-size="11">{v:g}</text>')
+        out.append(f'<text class="tick" x="{lx:.1f}" y="{ly:.1f}" font-size="11">{label}</text>')
     out.append(f'<text x="{f.width / 2:.0f}" y="{f.height - 20}" font-size="12">'
                "x (m), map frame</text>")
     out.append(f'<text x="12" y="{f.height / 2:.0f}" font-size="12" transform="rotate(-90 12 '
@@ -220,11 +226,9 @@ def to_png(pic: Picture) -> np.ndarray:
     def ip(p: tuple[float, float]) -> tuple[int, int]:
         return int(round(p[0])), int(round(p[1]))
 
-    for axis, v in f.grid():
-        a, b = (f.px(v, f.y0), f.px(v, f.y1)) if axis == "x" else (f.px(f.x0, v), f.px(f.x1, v))
+    for a, b, at, label in f.grid():
         cv2.line(img, ip(a), ip(b), bgr(GRID), 1)
-        at = (a[0] - 8, a[1] + 16) if axis == "x" else (a[0] - 40, a[1] + 4)
-        cv2.putText(img, f"{v:g}", ip(at), font, 0.4, bgr(INK), 1, cv2.LINE_AA)
+        cv2.putText(img, label, ip(at), font, 0.4, bgr(INK), 1, cv2.LINE_AA)
     cv2.putText(img, "x (m), map frame", (f.width // 2 - 60, f.height - 20), font, 0.45,
                 bgr(INK), 1, cv2.LINE_AA)
     cv2.putText(img, "y (m)", (8, int(f.px(f.x0, f.y1)[1]) - 8), font, 0.45, bgr(INK), 1,

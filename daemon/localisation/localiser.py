@@ -169,8 +169,9 @@ class Localiser:
         self.switcher = PlaceSwitcher(self.settings)
         self._pose_request: PoseRequest | None = None
         self._closure: CycleClosure | None = None
-        # The last reliable estimate while tracking and the odometry since: after a blind
-        # loss, the start of a transition to the place relocalisation finds (_bridge).
+        # The last reliable estimate while tracking and the odometry since: after a loss
+        # out of the place's view, the start of a transition to the place relocalisation
+        # finds (_bridge).
         self._fix: Fix | None = None
         # Look-alike places' disambiguating features (design §5), by the pair's ids.
         self._features: dict[frozenset[int], PairFeatures] = {}
