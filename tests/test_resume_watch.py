@@ -21,11 +21,8 @@ def _resumed_at_b(run: Run, acquisition: AcquisitionSettings) -> tuple[Localiser
     ids = {p.label: p.id for p in run.mapper.graph.places}
     cfg = run.cfg
     localiser = Localiser(cfg.mirror, cfg.panorama, acquisition=acquisition,
-                          settings=cfg.localisation, odometry_noise=cfg.odometry)
-    for place in run.mapper.graph.places:
-        localiser.know_place(place)
-    for t in run.mapper.graph.transitions:
-        localiser.know_transition(t)
+                          settings=cfg.localisation, odometry_noise=cfg.odometry,
+                          known_map=run.session.holder)  # the map as stored
     localiser.resume(ids["b"], (0.0, 0.0, 0.0), 0.05, 0.05)  # as the daemon's restart does
     run.localiser = localiser
     return localiser, ids

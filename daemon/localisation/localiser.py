@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -42,6 +41,7 @@ from daemon.localisation.belief import (
     PlaceScore,
 )
 from daemon.localisation.global_localisation import LeadWatch, LossDetector, PlaceSearch
+from daemon.localisation.known_map import KnownMap, MapHolder
 from daemon.localisation.local_positioning import LocalResult, PlaceTracker
 from daemon.localisation.odometry import OdometryBuffer, relative_motion
 from daemon.localisation.place_switching import (
@@ -59,12 +59,10 @@ from daemon.mapping.acquisition import (
     PlaceAcquisition,
     taken_over,
 )
-from daemon.mapping.backgrounds import Levels, levels, search_background
 from daemon.mapping.odometry_chain import OdometryChain
-from daemon.mapping.place import Place
 from daemon.mapping.settings import AcquisitionSettings, OdometryNoiseSettings
 from daemon.mapping.transition import Transition
-from daemon.vision.disambiguation import Feature, PairFeatures, choose
+from daemon.vision.disambiguation import Feature, choose
 from daemon.vision.floor import FloorModel
 from daemon.vision.local_space import CAP_M, LocalSpace, match_many
 from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
@@ -83,13 +81,6 @@ AFTER_LEARNING_SIGMA_M = 0.03
 AFTER_LEARNING_SIGMA_RAD = 0.03
 
 
-@dataclass(frozen=True)
-class KnownPlace:
-    place: Place  # without its reference panorama
-    templates: PreparedTemplates
-    background: float | None
-
-
 # A place recognised by acquisition's certain lead (design §6) is within about this of
 # the robot: in the reference views of offices 1 and 3, places nearer than 0.3 m stood
 # 0.20-0.23 above their backgrounds, those 0.3-0.75 m away 0.113 at most.
@@ -98,6 +89,9 @@ REVISIT_SIGMA_M = 0.3
 # Handed over through a path of transitions: particles at least this far around where
 # the path puts the robot (its drift is not all in its covariance).
 GRAPH_MIN_SIGMA_M = 0.3
+
+# Places nearest the tracked one by transitions that recognition and the bridge consider.
+THROUGH_GRAPH_PLACES = 64
 
 # What the localiser is doing (design §9).
 Mode = Literal["search", "confirm", "track", "recover"]
@@ -138,14 +132,16 @@ class Localiser:
     ODOMETRY_STALE_NS = 250_000_000
 
     def __init__(self, mirror: MirrorSettings, panorama: PanoramaSettings,
-                 places: int = 0, acquisition: AcquisitionSettings | None = None,
+                 acquisition: AcquisitionSettings | None = None,
                  settings: LocalisationSettings | None = None,
-                 odometry_noise: OdometryNoiseSettings | None = None) -> None:
+                 odometry_noise: OdometryNoiseSettings | None = None,
+                 known_map: MapHolder | None = None) -> None:
+        """``known_map``: the map's holder, whose owner (the service's MappingSession)
+        changes it; the localiser only reads it (daemon/localisation/known_map.py)."""
         self.unwarper = Unwarper(mirror, panorama)
         self.settings = settings or LocalisationSettings()
         self.odometry_noise = odometry_noise or OdometryNoiseSettings()
         self.odometry = OdometryBuffer()
-        self.places = places
         self.panorama: np.ndarray | None = None
         self._last_odometry: Odometry | None = None
         self._last_stamp_ns: int | None = None
@@ -156,12 +152,9 @@ class Localiser:
         self._awaiting_place = False  # a decision was made: the new place comes next
         self._learning = False  # a place is being learned (see learning())
         self._watched_learned = False  # learned where it began to be watched (its reference)
-        self._watch_next: tuple[int, PreparedTemplates] | None = None  # from other threads
-        self._known: dict[int, KnownPlace] = {}
-        # The backgrounds' levels and the places they were made over (design §9).
-        self._levels: tuple[dict[int, KnownPlace], Levels | None] | None = None
-        self._links: dict[int, dict[int, UncertainSE2]] = {}  # from -> to -> T_from_to
-        self._lock = threading.Lock()  # the map and requests arrive from other threads
+        self._watch_next: int | None = None  # set from other threads
+        self._holder = known_map or MapHolder()
+        self.map: KnownMap = self._holder.current  # the snapshot this frame reads
         self._meters: list[BackgroundMeter] = []  # places being left behind
         self.rng = np.random.default_rng(self.settings.seed)
         self.model = make_model(self.settings)
@@ -173,8 +166,6 @@ class Localiser:
         # out of the place's view, the start of a transition to the place relocalisation
         # finds (_bridge).
         self._fix: Fix | None = None
-        # Look-alike places' disambiguating features (design §5), by the pair's ids.
-        self._features: dict[frozenset[int], PairFeatures] = {}
         self._ambiguous_frames = 0  # the search's pick ambiguous this many frames in a row
         self._told_apart: Disambiguation | None = None  # in this frame
         self._floor_learned: FloorModel | None = None  # in this frame
@@ -196,32 +187,15 @@ class Localiser:
                                       ) if self.settings.local_space else None
 
     # ------------------------------------------------------------------ the map
-    def know_place(self, place: Place) -> None:
-        """A place of the map (its landmark set and background LRP, if measured). Safe to
-        call from another thread."""
-        known = KnownPlace(place, PreparedTemplates.of(place.landmarks.templates()),
-                           place.background_lrp)
-        with self._lock:
-            self._known = {**self._known, place.id: known}
-            self.places = len(self._known)
+    @property
+    def known_map(self) -> MapHolder:
+        """The holder of the map this localiser reads (its owner changes it)."""
+        return self._holder
 
-    def know_features(self, pair: PairFeatures) -> None:
-        """The disambiguating features of two look-alike places of the map (design §5).
-        Safe to call from another thread."""
-        with self._lock:
-            self._features = {**self._features, frozenset((pair.a_id, pair.b_id)): pair}
-
-    def know_transition(self, transition: Transition) -> None:
-        """A transition of the map, both ways. Safe to call from another thread."""
-        with self._lock:
-            for t in transition.both_ways():
-                self._links.setdefault(t.from_id, {})[t.to_id] = t.T_from_to
-
-    def watch_place(self, place: Place) -> None:
-        """Autonomous acquisition watches ``place`` (the one just learned) from the next
-        frame on. Safe to call from another thread."""
-        self.know_place(place)
-        self._watch_next = (place.id, self._known[place.id].templates)
+    def watch_place(self, place_id: int) -> None:
+        """Autonomous acquisition watches ``place_id`` (the one just learned, already in
+        the map) from the next frame on. Safe to call from another thread."""
+        self._watch_next = place_id
 
     def learning(self, driving: bool) -> None:
         """A place is being learned (``driving``: the robot drives the Turn Back and Look
@@ -237,14 +211,13 @@ class Localiser:
         another thread."""
         self._awaiting_place = False
 
-    def place_learned(self, place: Place, transitions: list[Transition]) -> None:
-        """A place just learned, with its transitions: acquisition watches it, and tracking
-        starts at its reference — Turn Back and Look ends where it began, to within the
-        cross's own error (AFTER_LEARNING_SIGMA). Safe to call from another thread."""
-        self.watch_place(place)
-        for t in transitions:
-            self.know_transition(t)
-        self.set_pose(place.id, (0.0, 0.0, 0.0), AFTER_LEARNING_SIGMA_M,
+    def place_learned(self, place_id: int) -> None:
+        """A place just learned and in the map with its transitions: acquisition watches
+        it, and tracking starts at its reference — Turn Back and Look ends where it
+        began, to within the cross's own error (AFTER_LEARNING_SIGMA). Safe to call from
+        another thread."""
+        self.watch_place(place_id)
+        self.set_pose(place_id, (0.0, 0.0, 0.0), AFTER_LEARNING_SIGMA_M,
                       AFTER_LEARNING_SIGMA_RAD)
 
     def know_floor(self, floor: FloorModel) -> None:
@@ -269,9 +242,10 @@ class Localiser:
         """Start tracking at ``pose`` in place ``place_id`` from the next frame on (design
         §7: particles spread by the sigmas, the settings' defaults when None). Safe to call
         from another thread; PlacecellError for a place the map does not hold."""
-        if place_id not in self._known:
+        known = self._holder.current
+        if place_id not in known:
             raise PlacecellError(f"place {place_id} is not in the map "
-                                 f"({len(self._known)} places)")
+                                 f"({len(known)} places)")
         if not all(math.isfinite(v) for v in pose):
             raise PlacecellError(f"a pose is three finite numbers, got {pose}")
         s = self.settings
@@ -322,6 +296,7 @@ class Localiser:
     # ------------------------------------------------------------------ per frame
     def process_frame(self, frame: Frame) -> Belief:
         t0 = time.perf_counter()  # timing only; never used by the method
+        self.map = self._holder.current  # one map for the whole frame
         self.panorama = self.unwarper.unwarp(frame.image)
         grey = to_grey(self.panorama)
         self._told_apart = self._floor_learned = None
@@ -408,33 +383,15 @@ class Localiser:
                     estimated: bool = False) -> list[PlaceScore]:
         """LRP and lead over the background (§9.2) of each place, in one matching pass;
         ``estimated``: with the backgrounds estimated at learning (the global search)."""
-        known = [self._known[p] for p in place_ids]
-        lrps = self.matcher.lrps(prepared, [k.templates for k in known])
-        return [PlaceScore(p, lrp, lrp - self._background(k, estimated))
-                for p, k, lrp in zip(place_ids, known, lrps, strict=True)]
+        known = self.map
+        lrps = self.matcher.lrps(prepared, [known.places[p].templates for p in place_ids])
+        return [PlaceScore(p, lrp, lrp - self._background(p, estimated))
+                for p, lrp in zip(place_ids, lrps, strict=True)]
 
-    def _background(self, known: KnownPlace, estimated: bool) -> float:
-        """The place's background LRP: measured, else (``estimated``) the estimate made
-        when it was learned, else the default (§7.1, design §9). Tracking between
-        places compares a place with its neighbours, where the default measured best
-        (cyclic, office 1: 0.013 m mean against 0.066 with the estimates); the global
-        search compares every place with every other, where the estimates are needed —
-        the cross estimates on the map's own-view level (daemon/mapping/backgrounds.py)."""
-        if known.background is not None:
-            return known.background
-        estimate = self._estimated_background(known) if estimated else None
-        return self.settings.background_lrp if estimate is None else estimate
-
-    def _estimated_background(self, known: KnownPlace) -> float | None:
-        """Measured, else the search's estimate (daemon/mapping/backgrounds.py); None:
-        the place has neither."""
-        if known.background is not None:
-            return known.background
-        known_places = self._known
-        if self._levels is None or self._levels[0] is not known_places:
-            # The map's levels, made again once it changes (know_place).
-            self._levels = (known_places, levels(k.place for k in known_places.values()))
-        return search_background(known.place, self._levels[1])
+    def _background(self, place_id: int, estimated: bool) -> float:
+        """The place's background LRP (KnownMap.background): ``estimated`` for the global
+        search, which compares every place with every other."""
+        return self.map.background(place_id, self.settings.background_lrp, estimated)
 
     # ------------------------------------------------------------------ global (§9)
     def _supervise(self, prepare: Callable[[], PreparedPanorama], grey: np.ndarray,
@@ -442,7 +399,7 @@ class Localiser:
                    ) -> tuple[list[PlaceScore], LocalisationEvent | None]:
         """Search, loss detection and recovery for this frame (module docstring): the
         places recognised by the search, and the event this frame brings, if any."""
-        places = list(self._known)
+        places = list(self.map.places)
         if self._relocalise_requested:
             self._relocalise_requested = False
             self._begin_search(stamp_ns)
@@ -471,7 +428,7 @@ class Localiser:
             if not self.search.running:
                 self.search.reset(stamp_ns)
             scored = self._search_step(prepare, grey, places,
-                                       (current, *self._links.get(current, {})))
+                                       (current, *self.map.neighbours(current)))
         elif self.mode == "track":
             self.search.reset(None)  # confident again: no background search
         found = self._recovered(local)
@@ -565,7 +522,7 @@ class Localiser:
         top = ranked[best]
         rivals = [p for p, lead in sorted(ranked.items(), key=lambda kv: -kv[1])
                   if p != best and p in places and top - lead <= s.ambiguity_margin]
-        rivals = [p for p in rivals if frozenset((best, p)) in self._features][:MAX_RIVALS]
+        rivals = [p for p in rivals if frozenset((best, p)) in self.map.features][:MAX_RIVALS]
         if not rivals:
             self._ambiguous_frames = 0
             return best  # no look-alike of it stands near: nothing for the features to do
@@ -576,7 +533,7 @@ class Localiser:
         features: dict[tuple[int, int], Feature] = {}
         for x in contenders:
             for y in contenders:
-                pair = self._features.get(frozenset((x, y))) if x < y else None
+                pair = self.map.features.get(frozenset((x, y))) if x < y else None
                 if pair is not None:
                     features[(pair.a_id, pair.b_id)] = pair.a
                     features[(pair.b_id, pair.a_id)] = pair.b
@@ -594,7 +551,7 @@ class Localiser:
         if not clear or scores[winner] - scores.get(best, 0.0) < s.disambiguation_min_vote:
             winner = best  # the features barely disagree with the lower levels: keep theirs
         runner_up = max((p for p in scores if p != winner
-                         and frozenset((winner, p)) in self._features),
+                         and frozenset((winner, p)) in self.map.features),
                         key=lambda p: scores[p])  # best, at least, is paired with each
         self._told_apart = Disambiguation(winner, runner_up, nccs[(winner, runner_up)],
                                           nccs[(runner_up, winner)],
@@ -606,9 +563,9 @@ class Localiser:
                      places: list[int], first: tuple[int, ...]) -> list[PlaceScore]:
         """One frame of the search: the cue of every place (signature similarity, design
         §9), then the frame's budget of places recognised, best first."""
-        with_signature = [p for p in places if self._known[p].place.signature is not None]
+        with_signature = [p for p in places if self.map.places[p].place.signature is not None]
         if with_signature:
-            sigs = np.stack([self._known[p].place.signature  # type: ignore[misc]
+            sigs = np.stack([self.map.places[p].place.signature  # type: ignore[misc]
                              for p in with_signature])
             here = signature(grey, self.unwarper.panorama.wrap_margin)
             self.search.set_cue(dict(zip(with_signature, similarity(here, sigs).tolist(),
@@ -624,10 +581,10 @@ class Localiser:
         local = self.local_space
         if local is None or local.floor is None or self.settings.local_space_margin >= 1.0:
             return None  # no floor yet, or every place kept whatever its match
-        with_profile = [p for p in places if self._known[p].place.local_space is not None]
+        with_profile = [p for p in places if self.map.places[p].place.local_space is not None]
         if not with_profile:
             return None
-        profiles = np.stack([self._known[p].place.local_space  # type: ignore[misc]
+        profiles = np.stack([self.map.places[p].place.local_space  # type: ignore[misc]
                              for p in with_profile])
         return dict(zip(with_profile, match_many(local.profile(), profiles, CAP_M).tolist(),
                         strict=True))
@@ -649,7 +606,7 @@ class Localiser:
     def _start_in(self, grey: np.ndarray, place_id: int) -> None:
         """Global relocalisation's pick: particles over ``recovery_sigma_m`` around the
         place's reference, the orientation from the bearings (§9.3.2, eq. 8.34)."""
-        tracker = PlaceTracker(self._known[place_id].place, self.settings, self.model,
+        tracker = PlaceTracker(self.map.places[place_id].place, self.settings, self.model,
                                self.rng)
         tracker.start_anywhere(grey, self.settings.recovery_sigma_m)
         self.tracker, self._closure = tracker, self._bridge(place_id)
@@ -668,7 +625,7 @@ class Localiser:
         fix, s = self._fix, self.settings  # kept: a rejected pick may be followed by another
         if fix is None or fix.place_id == place_id or fix.odometry.broken \
                 or not 0 < fix.odometry.distance_m <= s.bridge_max_m \
-                or place_id in self._through_graph(fix.place_id):
+                or place_id in self.map.through_graph(fix.place_id, THROUGH_GRAPH_PLACES):
             return None
         return CycleClosure(fix.place_id, place_id, fix.T_place_robot, fix.odometry, s,
                             after_confirmation=True)
@@ -701,7 +658,7 @@ class Localiser:
         request, self._pose_request = self._pose_request, None
         if request is None:
             return False
-        self.tracker = PlaceTracker(self._known[request.place_id].place, self.settings,
+        self.tracker = PlaceTracker(self.map.places[request.place_id].place, self.settings,
                                     self.model, self.rng)
         self.tracker.start(grey, request.pose, request.sigma_xy, request.sigma_yaw)
         self._closure = None
@@ -720,22 +677,22 @@ class Localiser:
         the estimate on when another place takes over (§8.2, §7.1.3)."""
         assert self.tracker is not None and self.tracker.estimate is not None
         current = self.tracker.place.id
-        links = self._links.get(current, {})
-        neighbours = [p for p in links if p in self._known]
+        links = self.map.neighbours(current)
+        neighbours = [p for p in links if p in self.map.places]
         estimate = self.tracker.estimate
         x, y, _ = estimate.pose
-        through = self._through_graph(current)
+        through = self.map.through_graph(current, THROUGH_GRAPH_PLACES)
         distance = {current: math.hypot(x, y)} | {  # T_current_p's origin: p's reference
             p: math.hypot(T.mean.x - x, T.mean.y - y) for p, T in through.items()}
-        near = [p for p in through if p not in neighbours and p in self._known
+        near = [p for p in through if p not in neighbours and p in self.map.places
                 and distance[p] <= self.settings.cycle_near_m]
-        checked = self.switcher.to_check(current, neighbours, list(self._known), near)
+        checked = self.switcher.to_check(current, neighbours, list(self.map.places), near)
         scores = self._score_many(prepared, checked)
         switch = self.switcher.decide(current, neighbours, scores, distance, near)
         if switch is None:
             return tuple(scores), None
         here = UncertainSE2(SE2.of(estimate.pose), estimate.covariance)
-        target = self._known[switch.place_id].place
+        target = self.map.places[switch.place_id].place
         tracker = PlaceTracker(target, self.settings, self.model, self.rng)
         if switch.kind in ("neighbour", "graph"):
             # §8.2, eq. 8.35: the pose in the neighbour's frame, T_to_robot = T_from_to⁻¹ ∘
@@ -768,28 +725,13 @@ class Localiser:
         self.loss.reset()  # a new place's landmarks: its own evidence from here on
         return tuple(scores), current
 
-    def _through_graph(self, start: int, max_places: int = 64) -> dict[int, UncertainSE2]:
-        """T_start_p of the places nearest ``start`` by transitions (breadth first, the
-        first path found, its covariance composed along it), up to ``max_places``."""
-        found = {start: UncertainSE2(SE2(), np.zeros((3, 3)))}
-        queue = [start]
-        while queue and len(found) < max_places:
-            a = queue.pop(0)
-            for b, T in self._links.get(a, {}).items():
-                if b not in found:
-                    found[b] = found[a].compose(T)
-                    queue.append(b)
-        del found[start]
-        return found
-
     def _observe_closure(self, local: LocalResult) -> Transition | None:
         assert self._closure is not None
         est = local.estimate
         closed = self._closure.observe(UncertainSE2(SE2.of(est.pose), est.covariance),
                                        local.confidence)
-        if closed is not None:
+        if closed is not None:  # the map's owner stores it (Belief.closed_transition)
             self._closure = None
-            self.know_transition(closed)
         return closed
 
     def _belief(self, stamp_ns: int, odometry_ok: bool,
@@ -808,20 +750,20 @@ class Localiser:
         no_odometry = "" if odometry_ok else \
             "; no odometry at this frame (base silent): motion unknown"
         tracker = self.tracker
-        if not self._known:
+        if not self.map.places:
             return Belief(state="uninitialised", reason="the map has no places yet"
                           + no_odometry, **common)  # type: ignore[arg-type]
         if self.mode == "search" or tracker is None or tracker.estimate is None:
-            n = len(self._known)
-            done = sum(p in self.search.scores for p in self._known)
+            n = len(self.map.places)
+            done = sum(p in self.search.scores for p in self.map.places)
             best = self.search.ranked()[:1]
             reason = f"global relocalisation: {done} of {n} places recognised" + (
                 f", most likely {best[0].place_id} (lead {best[0].lead:.3f})" if best else "")
             tied = self._undecided if self.mode == "search" else None
-            if tied is not None and tied in self._known:
+            if tied is not None and tied in self.map.places:
                 reason += "; look-alikes stand tied: their features decide shortly"
                 return Belief(state="relocalising", reason=reason + no_odometry, event=event,
-                              place_id=tied, place_label=self._known[tied].place.label,
+                              place_id=tied, place_label=self.map.places[tied].place.label,
                               **common)  # type: ignore[arg-type]
             return Belief(state="relocalising", reason=reason + no_odometry, event=event,
                           **common)  # type: ignore[arg-type]
@@ -854,8 +796,8 @@ class Localiser:
         if self.acquisition is None or self.panorama is None:
             return None, None, None, ()
         learned, self._watch_next = self._watch_next, None  # set from other threads
-        if learned is not None:
-            self._watch(learned[0], learned=True)
+        if learned is not None and learned in self.map:
+            self._watch(learned, learned=True)
             self._awaiting_place = False
         if self._watched is None and not self._awaiting_place and self.mode == "track" \
                 and self.tracker is not None:
@@ -911,11 +853,12 @@ class Localiser:
         acq = self.acquisition.settings
         watched = self._watched[0]
         tracked = self.tracker.place.id if self.tracker is not None else None
-        top = self._most_like_view(grey, [p for p in self._known if p not in (watched, tracked)])
+        top = self._most_like_view(grey, [p for p in self.map.places
+                                          if p not in (watched, tracked)])
         if not top:
             return None
         best = max(self._score_many(prepare(), top, estimated=True), key=lambda sc: sc.lead)
-        watched_lead = watched_lrp - self._background(self._known[watched], estimated=True)
+        watched_lead = watched_lrp - self._background(watched, estimated=True)
         if best.lead < max(acq.certain_lead, watched_lead):
             return None
         self._watch(best.place_id, learned=False)
@@ -925,7 +868,7 @@ class Localiser:
         """Acquisition watches ``place_id`` from here: ``learned`` there (its reference
         is where the watch begins), or a known place taken over."""
         assert self.acquisition is not None
-        self._watched = (place_id, self._known[place_id].templates)
+        self._watched = (place_id, self.map.places[place_id].templates)
         self._watched_learned = learned
         self.acquisition.reset(place_id)
 
@@ -934,11 +877,11 @@ class Localiser:
         view (design §9's cue), most like first; places without a signature left out."""
         assert self.acquisition is not None
         k = self.acquisition.settings.revisit_candidates
-        signed = [p for p in candidates if self._known[p].place.signature is not None]
+        signed = [p for p in candidates if self.map.places[p].place.signature is not None]
         if not signed or k == 0:
             return []
         here = signature(grey, self.unwarper.panorama.wrap_margin)
-        cue = similarity(here, np.stack([self._known[p].place.signature  # type: ignore[misc]
+        cue = similarity(here, np.stack([self.map.places[p].place.signature  # type: ignore[misc]
                                          for p in signed]))
         return [signed[i] for i in np.argsort(-cue)[:k]]
 
@@ -949,7 +892,7 @@ class Localiser:
         assert self.tracker is not None and self.tracker.estimate is not None
         current, est = self.tracker.place.id, self.tracker.estimate
         confidence = self.tracker.confidence
-        tracker = PlaceTracker(self._known[place_id].place, self.settings, self.model,
+        tracker = PlaceTracker(self.map.places[place_id].place, self.settings, self.model,
                                self.rng)
         tracker.start_anywhere(grey, REVISIT_SIGMA_M)
         self._closure = None
@@ -969,8 +912,7 @@ class Localiser:
         The estimate is the place's own: on office 1's 93 places it came within 0.013 of
         the background measured later (mean absolute error), the map's median within
         0.044 — a place whose background stands high would be left too late."""
-        known = self._known.get(place_id)
-        return None if known is None else self._estimated_background(known)
+        return self.map.estimated_background(place_id)
 
     def _crowded(self, within_m: float, exclude: int | None) -> int | None:
         """The place the map puts nearest the tracked estimate, if nearer than
@@ -989,7 +931,7 @@ class Localiser:
         current, pose, through = around
         nearest = nearest_place(current, pose, through, exclude)
         return nearest[0] if nearest is not None and nearest[1] < within_m \
-            and nearest[0] in self._known else None
+            and nearest[0] in self.map.places else None
 
     def _near_estimate(self, within_m: float) -> set[int] | None:
         """The places the map's transitions put within ``within_m`` of the tracked
@@ -999,7 +941,7 @@ class Localiser:
         if around is None:
             return None
         current, pose, through = around
-        unreached = {p for p in self._known if p != current and p not in through}
+        unreached = {p for p in self.map.places if p != current and p not in through}
         return unreached | places_near(current, pose, through, within_m)
 
     def _estimate_in_map(self) -> tuple[int, tuple[float, float, float],
@@ -1010,23 +952,19 @@ class Localiser:
         if tracker is None or tracker.estimate is None or self.mode != "track":
             return None
         current = tracker.place.id
-        return current, tracker.estimate.pose, self._through_graph(
-            current, max_places=len(self._known))
+        return current, tracker.estimate.pose, self.map.through_graph(current)
 
     def _measure_backgrounds(self, prepared: PreparedPanorama, odo: Odometry | None
                              ) -> tuple[tuple[int, float], ...]:
         done: list[tuple[int, float]] = []
         for meter in list(self._meters):
-            known = self._known.get(meter.place_id)
+            known = self.map.places.get(meter.place_id)
             if known is None:
                 self._meters.remove(meter)
                 continue
             value = meter.observe(self.matcher.lrp(prepared, known.templates), odo)
-            if value is not None:
+            if value is not None:  # the map's owner stores it (Belief.backgrounds)
                 self._meters.remove(meter)
-                with self._lock:
-                    self._known = {**self._known, meter.place_id: KnownPlace(
-                        known.place, known.templates, value)}
                 done.append((meter.place_id, value))
         return tuple(done)
 
@@ -1039,8 +977,8 @@ class Localiser:
         revisit), which count only by ``certain_lead``."""
         assert self.acquisition is not None
         near = self._near_estimate(self.acquisition.settings.known_within_m)
-        ids = [p for p in self._known if p != exclude and (near is None or p in near)]
-        ids += self._most_like_view(grey, [p for p in self._known
+        ids = [p for p in self.map.places if p != exclude and (near is None or p in near)]
+        ids += self._most_like_view(grey, [p for p in self.map.places
                                            if p != exclude and p not in ids])
         scores = self._score_many(prepared, ids, estimated=True)
         return taken_over({sc.place_id: sc.lead for sc in scores}, self.acquisition.settings,

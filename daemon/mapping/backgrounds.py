@@ -67,3 +67,16 @@ def search_background(place: Place, map_levels: Levels | None) -> float | None:
     if place.background_cross is not None and map_levels is not None:
         return place.background_cross - map_levels.cross + map_levels.own
     return place.background_estimate
+
+
+def place_background(place: Place, default: float, map_levels: Levels | None,
+                     estimated: bool) -> float:
+    """The one rule for a place's background LRP (design §9): measured, when it has been;
+    else, ``estimated``, ``search_background`` (the cross estimate on ``map_levels``,
+    else the own-view estimate: with ``map_levels`` None, the own view only, as
+    look-alikes are found, daemon/mapping/lookalikes.py); else ``default`` (the
+    ``[localisation] background_lrp`` tracking between neighbours uses)."""
+    if place.background_lrp is not None:
+        return place.background_lrp
+    value = search_background(place, map_levels) if estimated else None
+    return default if value is None else value

@@ -23,8 +23,6 @@ import zenoh
 import daemon
 from daemon.config import PlacecellConfig
 from daemon.localisation.localiser import Belief, Localiser
-from daemon.mapping.transition import Transition
-from daemon.mapping.unmapped import UnmappedWatch
 from daemon.service import access, api, queries, wire, zenoh_link
 from daemon.service.components import (
     LatestFrame,
@@ -45,8 +43,9 @@ from daemon.service.learn_job import (
 from daemon.service.live_view import TOPICS, LiveScene, Sink
 from daemon.service.map_file import open_map
 from daemon.service.mapper import Mapper, Seen
+from daemon.service.mapping_session import Event, MappingSession
 from daemon.service.notify import Notifier
-from daemon.service.pipeline import make_localiser
+from daemon.service.pipeline import make_localiser, resume
 from daemon.service.ros2 import Ros2PosePublisher
 from daemon.service.supervisor import Supervisor, describe
 from daemon.store.sqlite_store import SavedPose
@@ -57,10 +56,6 @@ from kernel.errors import PlacecellError
 from kernel.se2 import SE2
 
 log = logging.getLogger(__name__)
-
-# A resumed pose is spread at least this much: the robot may have been pushed while off.
-RESUME_MIN_SIGMA_M = 0.05
-RESUME_MIN_SIGMA_RAD = 0.05
 
 
 class Daemon:
@@ -99,9 +94,11 @@ class Daemon:
         self._job: LearnJob | None = None
         self._queryables: list[Any] = []
         self._acquire_after = 0.0  # monotonic s: no autonomous learning before
-        self._unmapped = UnmappedWatch(config.mapping.acquisition)
-        # cmd/mode changes it until the daemon stops; a read-only map only localises.
-        self.mode = config.mapping.mode if self.map_readonly_reason is None else "localisation"
+        # The map's one owner (design §6); cmd/mode changes its mode until the daemon
+        # stops; a read-only map only localises.
+        self.session = MappingSession(
+            self.mapper, config.mapping.acquisition, config.localisation,
+            config.mapping.mode if self.map_readonly_reason is None else "localisation")
         self._tracked: SavedPose | None = None  # the last pose tracked, to save
         self._saved: SavedPose | None = None  # the one saved last
         self.supervisor = Supervisor(
@@ -109,6 +106,10 @@ class Daemon:
             on_event=self.publish_event, fault_summary_s=config.service.fault_summary_s,
         )
         self._build_components()
+
+    @property
+    def mode(self) -> str:
+        return self.session.mode
 
     # ------------------------------------------------------------------ set-up
     def _build_components(self) -> None:
@@ -142,16 +143,14 @@ class Daemon:
 
     def _localiser(self, acquisition: Any) -> Localiser:
         with self.mapper.lock:
-            localiser = make_localiser(self.config, self.mapper.graph, acquisition)
+            localiser = make_localiser(self.config, self.session.holder, self.mapper.graph,
+                                       acquisition)
         last = self.mapper.last_place
         if last is not None:  # a restarted processing component goes on watching it
-            localiser.watch_place(self.mapper.graph.place(last))
+            localiser.watch_place(last)
         saved = self._saved_pose()
         if saved is not None and not self.config.localisation.initial_place:
-            cov = saved.covariance
-            localiser.resume(saved.place_id, saved.pose,
-                             max(math.sqrt(max(cov[0, 0], cov[1, 1])), RESUME_MIN_SIGMA_M),
-                             max(math.sqrt(cov[2, 2]), RESUME_MIN_SIGMA_RAD))
+            resume(localiser, saved)
             log.info("resuming in place %d at (%.3f, %.3f, %.3f), saved %.0f s ago",
                      saved.place_id, *saved.pose, time.time() - saved.saved_unix_s)
         return localiser
@@ -256,54 +255,15 @@ class Daemon:
 
     # ------------------------------------------------------------ autonomous acquisition
     def _maybe_acquire(self, belief: Belief) -> None:
-        """Learn a place on the robot's own (design §6): the first one on an empty map as
-        soon as the robot can learn, then each time the watched place's LRP has settled at
-        its background while the robot is tracked, and in unmapped space after a loss (a
-        new segment)."""
-        acq = self.config.mapping.acquisition
-        if self.mode != "mapping":
-            return  # the map is read-only
-        if belief.floor_learned is not None and self.mapper.graph.floor is None:
-            self.mapper.save_floor(belief.floor_learned)
-            log.info("floor model learned from the first colour frame and stored with the "
-                     "map (gradient threshold %.3f)", belief.floor_learned.gradient_threshold)
-        for place_id, background in belief.backgrounds:
-            self.mapper.set_background(place_id, background)
-            self.publish_event("background_measured", place=place_id,
-                               background_lrp=round(background, 4))
-        decision = belief.acquisition
+        """Learn a place on the robot's own when the map's owner wants one (design §6:
+        MappingSession.wants_place), unless an operator acted a moment ago."""
         localiser = self.processing.localiser
-        lost_in_unmapped_space = self._unmapped.observe(
-            belief.state in ("tracking", "uninitialised") or self._job is not None,
-            None if localiser is None else localiser.odometry.latest)
-        # Not now: acquisition watches on and asks again. Nor while the robot is lost:
-        # where it stands from the last place is unknown (it may have been carried off);
-        # the unmapped-space rule below learns there if the search finds nothing.
-        if not acq.enabled or self._job is not None or not belief.odometry_ok \
-                or time.monotonic() < self._acquire_after \
-                or (decision is not None and belief.state != "tracking"):
-            if decision is not None:
+        why = self.session.wants_place(belief, None if localiser is None
+                                       else localiser.odometry.latest, self._job is not None)
+        if why is None or time.monotonic() < self._acquire_after:
+            if belief.acquisition is not None:  # not now: acquisition watches on, asks again
                 self._learning_not_started()
             return
-        why = "the first one" if decision is None else \
-            f"place {decision.place_id}'s background reached"
-        if decision is None and self.mapper.place_count() > 0:
-            # The first place only on an empty map: a restart resumes, not re-learns.
-            # Searched long enough, as the robot moved, without finding a place: unmapped
-            # space. A place is learned here, a segment of its own: no odometry link to
-            # the last place (the robot may have been carried), none from an estimate.
-            if not lost_in_unmapped_space:
-                return
-            why = (f"unmapped space: no known place found in {self._unmapped.frames} "
-                   f"frames over {self._unmapped.travelled_m:.2f} m; a new segment")
-            self.mapper.odometry_restarted()
-        if decision is not None:
-            self.mapper.set_background(decision.place_id, decision.background_lrp)
-            if localiser is not None:
-                localiser.know_place(self.mapper.graph.place(decision.place_id))
-            self.publish_event("background_reached", place=decision.place_id,
-                               lrp=round(decision.lrp, 4),
-                               distance_m=round(decision.distance_m, 3))
 
         def log_reply(kind: str, fields: dict[str, Any]) -> None:
             if kind == "error":
@@ -311,11 +271,12 @@ class Daemon:
 
         try:
             self._start_learning(api.LearnRequest(), log_reply, "autopilot")
-            self._unmapped.reset()
+            self.session.learning_started()
             log.info("learning a place on my own (%s)", why)
         except api.RequestError as e:
             log.warning("autonomous learning not started: %s", e)
-            self._acquire_after = time.monotonic() + acq.retry_after_s
+            self._acquire_after = time.monotonic() + \
+                self.config.mapping.acquisition.retry_after_s
             self._learning_not_started()
 
     def _learning_not_started(self) -> None:
@@ -360,9 +321,8 @@ class Daemon:
             job = LearnJob(label=request.label,
                            settings=job_settings(self.config.tbl, request.extent_m),
                            unwarper=self._unwarper, feed=FrameFeed(rate),
-                           mover=BaseCommands(lambda: self.base.device), mapper=self.mapper,
+                           mover=BaseCommands(lambda: self.base.device), session=self.session,
                            reply=reply, on_done=self._learning_done, seen=self._seen,
-                           localisation=self.config.localisation,
                            profile=self._place_profile,
                            odometry_timeout_s=self.config.base.read_timeout_s,
                            link_up=lambda: self.supervisor.health["base"].state == "running",
@@ -410,47 +370,21 @@ class Daemon:
             self._learning_not_started()
         if outcome.place is not None:
             p = outcome.place
-            added = self.mapper.graph.neighbours(p.id)
-            self._publish_segment_changes(p.id, outcome.segments_before,
-                                          {"place_learned": p.id})
-            if localiser is not None:
-                localiser.place_learned(p, added)
-                for place in outcome.rebackgrounded:
-                    localiser.know_place(place)
-                for pair in self.mapper.graph.features:
-                    if p.id in (pair.a_id, pair.b_id):
-                        localiser.know_features(pair)
+            if localiser is not None:  # the map's owner has shown it the place already
+                localiser.place_learned(p.id)
+            segments = [e for e in outcome.events if e[0] != "transition_added"]
+            self._publish_events(segments)
             self.publish_event("place_learned", place=p.id, label=p.label,
                                landmarks=p.landmark_count, lookalikes=outcome.lookalikes,
                                reference_stamp_ns=outcome.reference_stamp_ns)
-            for t in added:
-                self.publish_event("transition_added", source=t.source,
-                                   **{"from": t.from_id, "to": t.to_id})
+            self._publish_events([e for e in outcome.events if e not in segments])
         else:
             self.publish_event("learning_ended", code=str(outcome.error),
                                message=outcome.message, started_by=job.started_by)
 
-    def _publish_segment_changes(self, new_place: int | None, before: dict[int, int],
-                                 by: dict[str, Any]) -> None:
-        """Events for what a change of the map did to its segments (design §6): a place
-        learned with no transition starts one; a transition between two joins them."""
-        after = dict(self.mapper.segment_of)
-        count = len(set(after.values()))
-        if new_place is not None and after.get(new_place) == new_place and before \
-                and list(after.values()).count(new_place) == 1:
-            self.publish_event("segment_started", place=new_place, segments=count,
-                               reason="learned with no transition to a known place: "
-                                      "unmapped space, or the robot's pose was unknown")
-        merged: dict[int, set[int]] = {}
-        for place, segment in before.items():
-            if place in after:
-                merged.setdefault(after[place], set()).add(segment)
-        for segment, parts in sorted(merged.items()):
-            if len(parts) > 1:
-                log.info("segments %s joined into segment %d (%d left)", sorted(parts),
-                         segment, count)
-                self.publish_event("segments_joined", segment=segment, joined=sorted(parts),
-                                   segments=count, by=by)
+    def _publish_events(self, events: list[Event]) -> None:
+        for kind, fields in events:
+            self.publish_event(kind, **fields)
 
     def _job_odometry(self, samples: list[Any], base: Any) -> None:
         job = self._job
@@ -530,7 +464,7 @@ class Daemon:
                     raise api.RequestError(api.ErrorCode.BUSY, "a place is being learned: "
                                            "wait for it or send cmd/abort, then switch",
                                            api.Reason.JOB_RUNNING)
-                previous, self.mode = self.mode, request.mode
+                previous, self.session.mode = self.mode, request.mode
             log.info("mode %s -> %s at the operator's request", previous, self.mode)
             self.publish_event("mode_changed", mode=self.mode, previous=previous)
         query.reply(query.key_expr, api.result(mode=self.mode))
@@ -650,8 +584,10 @@ class Daemon:
                 and belief.state == "tracking" and belief.covariance is not None:
             self._publish_ros2(belief, place, in_map)
         self.publish("belief", zenoh_link.encode("placecell.belief", body))
-        if belief.closed_transition is not None:
-            self._store_cycle(belief.closed_transition)
+        try:  # what the frame does to the map, through its one owner (design §6)
+            self._publish_events(self.session.observe(belief))
+        except PlacecellError as e:  # the map file refused: say so, keep localising
+            log.error("the map was not changed: %s", e)
         event = belief.event
         if event is not None and event.kind == "lost":
             self.publish_event("lost", place=event.place_id, reason=event.how)
@@ -671,25 +607,6 @@ class Daemon:
                 self.config.mapping.acquisition.retry_after_s
         if self._scene is not None:
             self._show(belief, body, in_map)
-
-    def _store_cycle(self, transition: Transition) -> None:
-        """A cycle closed by local estimates in both places (design §6, §7.1.3)."""
-        if self.mode != "mapping":
-            log.info("cycle %d -> %d measured; not stored in localisation mode",
-                     transition.from_id, transition.to_id)
-            return
-        before = dict(self.mapper.segment_of)
-        try:
-            self.mapper.add_transition(transition)
-        except (PlacecellError, KeyError) as e:
-            log.error("could not store the cycle's transition: %s", e)
-            return
-        self._publish_segment_changes(None, before, {"from": transition.from_id,
-                                                     "to": transition.to_id})
-        m = transition.T_from_to.mean
-        self.publish_event("transition_added", source="cycle", x=round(m.x, 4),
-                           y=round(m.y, 4), yaw=round(m.yaw, 5),
-                           **{"from": transition.from_id, "to": transition.to_id})
 
     # ------------------------------------------------------------------ status
     def status(self) -> dict[str, Any]:

@@ -21,14 +21,14 @@ from typing import Any
 import numpy as np
 
 from daemon.localisation.odometry import OdometryBuffer
-from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.place import Place
 from daemon.mapping.settings import TblSettings
 from daemon.mapping.tbl import Progress
 from daemon.service import api
 from daemon.service.api import ErrorCode
 from daemon.service.learning import drive_tbl, frame_with_odometry
-from daemon.service.mapper import Link, Mapper, Seen
+from daemon.service.mapper import Link, Seen
+from daemon.service.mapping_session import Event, MappingSession
 from daemon.vision.unwarp import Unwarper
 from hal.base.base import BaseInfo, BaseStatus
 from hal.base.settings import BaseSettings
@@ -143,11 +143,8 @@ class LearnOutcome:
     error: ErrorCode | None
     message: str
     lookalikes: list[int] = field(default_factory=list)  # places it was told apart from
-    # Places whose background in other places' views it changed (itself among them).
-    rebackgrounded: list[Place] = field(default_factory=list)
     reference_stamp_ns: int = 0  # the odometry stamp at the place's reference pose
-    # Each place's segment before the place was stored (design §6): what it changed.
-    segments_before: dict[int, int] = field(default_factory=dict)
+    events: list[Event] = field(default_factory=list)  # what storing it did to the map
 
 
 class LearnJob:
@@ -157,18 +154,17 @@ class LearnJob:
     kind = "learn_place"
 
     def __init__(self, *, label: str, settings: TblSettings, unwarper: Unwarper,
-                 feed: FrameFeed, mover: BaseCommands, mapper: Mapper, reply: Reply,
+                 feed: FrameFeed, mover: BaseCommands, session: MappingSession, reply: Reply,
                  on_done: Callable[[LearnJob, LearnOutcome], None],
                  seen: Callable[[], Seen | None] = lambda: None,
-                 localisation: LocalisationSettings | None = None,
                  profile: Callable[[np.ndarray | None], np.ndarray | None] = lambda _: None,
                  odometry_timeout_s: float = BaseSettings().read_timeout_s,
                  link_up: Callable[[], bool] = lambda: True,
                  started_by: str = "operator") -> None:
         """``seen``: the localiser's reliable estimate of the robot now, if any (it joins
-        the new place to the map, design §6); ``localisation``: how look-alike places
-        are found (design §5); ``profile``: the local space profile of a reference
-        panorama (design §4), None while the localiser cannot tell;
+        the new place to the map, design §6); ``session``: the map's owner, which stores
+        the place (daemon/service/mapping_session.py); ``profile``: the local space
+        profile of a reference panorama (design §4), None while the localiser cannot tell;
         ``odometry_timeout_s`` and ``link_up``: see :class:`FeedSensors`; ``started_by``:
         ``operator`` or ``autopilot`` (autonomous acquisition, which an operator's learn
         pre-empts)."""
@@ -177,13 +173,12 @@ class LearnJob:
         self._odometry_timeout_s = odometry_timeout_s
         self._link_up = link_up
         self._profile = profile
-        self.localisation = localisation or LocalisationSettings()
         self._seen = seen
         self.settings = settings
         self.unwarper = unwarper
         self.feed = feed
         self.mover = mover
-        self.mapper = mapper
+        self.session = session
         self._reply = reply
         self._on_done = on_done
         self.abort_requested = threading.Event()
@@ -215,7 +210,7 @@ class LearnJob:
             self._reply("progress", {"phase": step.phase, "fraction": round(step.fraction, 3)})
 
     def _begin(self, start: Odometry) -> None:
-        self._links = self.mapper.begin_place(start, self._seen())
+        self._links = self.session.begin_place(start, self._seen())
 
     def _run(self) -> None:
         outcome = LearnOutcome(None, ErrorCode.FAILED, "learning did not finish")
@@ -232,19 +227,13 @@ class LearnJob:
             place = Place(tbl.result(), tbl.reference_panorama, label=self.label,
                           created_unix_s=time.time(),
                           local_space=self._profile(tbl.reference_panorama))
-            before = dict(self.mapper.segment_of)
-            stored, transitions = self.mapper.add_place(place, self._links)
-            outcome = LearnOutcome(stored, None, "", reference_stamp_ns=tbl.start.stamp_ns,
-                                   segments_before=before)
-            self._reply("progress", {"phase": "lookalikes", "fraction": 1.0})
-            try:
-                changed = self.mapper.measure_cross_backgrounds(stored.id)
-                pairs = self.mapper.learn_features(stored.id, tbl.views, self.localisation)
-                outcome = LearnOutcome(stored, None, "", [p.b_id for p in pairs], changed,
-                                       tbl.start.stamp_ns, before)
-            except Exception:  # noqa: BLE001 - the place is stored; cues can be redone
-                log.exception("place %d: its backgrounds or look-alikes' features were not "
-                              "found", stored.id)
+            learned = self.session.store_place(
+                place, self._links, tbl.views,
+                on_stored=lambda _: self._reply("progress", {"phase": "lookalikes",
+                                                             "fraction": 1.0}))
+            stored, transitions = learned.place, learned.transitions
+            outcome = LearnOutcome(stored, None, "", learned.lookalikes, tbl.start.stamp_ns,
+                                   learned.events)
             self._reply("result", {
                 "place": {"id": stored.id, "label": stored.label,
                           "landmarks": stored.landmark_count,
@@ -263,7 +252,7 @@ class LearnJob:
             outcome = LearnOutcome(None, ErrorCode.FAILED, f"{type(e).__name__}: {e}")
         finally:
             if outcome.place is None:
-                self.mapper.cancel_place()
+                self.session.cancel_place()
                 self._reply("error", api.error_fields(outcome.error or ErrorCode.FAILED,
                                                       outcome.message))
             self._on_done(self, outcome)

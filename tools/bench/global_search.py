@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 
 from daemon.config import load
+from daemon.localisation.known_map import KnownMap, MapHolder
 from daemon.localisation.localiser import Localiser
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.place import Place
@@ -90,9 +91,8 @@ def decision_ms(places: list[Place], poses: list[tuple[str, tuple[float, float, 
     """(median ms, mean frames, mean share of the map recognised) to a decision, and the
     share of decisions that chose a right place (within 0.5 m of the nearest one)."""
     config = load(None)
-    localiser = Localiser(config.mirror, config.panorama, settings=LocalisationSettings())
-    for place in places:
-        localiser.know_place(place)
+    localiser = Localiser(config.mirror, config.panorama, settings=LocalisationSettings(),
+                          known_map=MapHolder(KnownMap.of(places)))
     rng = np.random.default_rng(0)
     renderers: dict[str, Renderer] = {}
     times, frames, fractions, right = [], [], [], []

@@ -105,9 +105,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         def frames(dx: float, dy: float) -> Iterator[Belief]:
             nonlocal switches
             for belief in r.drive(dx, dy, 0.0, args.speed):
-                if belief.closed_transition is not None:  # stored as the daemon does
+                if belief.closed_transition is not None:  # Run.step stored it
                     closed.append(belief.closed_transition)
-                    r.mapper.add_transition(belief.closed_transition)
                 switches += belief.switched_from is not None
                 yield belief
 

@@ -2,9 +2,11 @@
 
 :class:`Run` opens the HAL sim camera and base of one configuration, feeds every frame and
 every odometry sample to one :class:`~daemon.localisation.localiser.Localiser` (the
-object the daemon runs), learns places with the daemon's Turn Back and Look loop and
-:class:`~daemon.service.mapper.Mapper` (a real map file), and reads ground truth through
-the simulator's truth interface (``true_pose``) for the evaluator only.
+object the daemon runs), learns places with the daemon's Turn Back and Look loop, changes
+the map only through the daemon's :class:`~daemon.service.mapping_session.MappingSession`
+(a real map file; what a belief, a learned place or a closed cycle does to the map is the
+daemon's own code), and reads ground truth through the simulator's truth interface
+(``true_pose``) for the evaluator only.
 """
 
 from __future__ import annotations
@@ -26,15 +28,18 @@ from daemon.localisation.belief import Belief
 from daemon.localisation.localiser import Localiser
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.place import Place
+from daemon.mapping.settings import AcquisitionSettings
 from daemon.mapping.tbl import cross_legs
 from daemon.service.learning import DeviceSensors, drive_tbl
 from daemon.service.mapper import Link, Mapper
-from daemon.service.pipeline import make_localiser
-from daemon.store.sqlite_store import MapStore
+from daemon.service.mapping_session import Event, MappingSession
+from daemon.service.pipeline import make_localiser, resume
+from daemon.store.sqlite_store import MapStore, SavedPose
 from hal.registry import HalContext, create_base, create_camera
 from hal.sim.factory import build_sim_robot
 from hal.sim.robot import SimRobot
 from hal.sim.scenario import Scenario
+from kernel.errors import LearningError
 from kernel.panorama import geometry_checksum
 from kernel.se2 import SE2
 from kernel.settings import as_dict, build
@@ -102,12 +107,14 @@ class Run:
                                                lambda: build_sim_robot(cfg, scenario))
         self.camera, self.base = create_camera(cfg.camera, self.ctx), create_base(cfg.base,
                                                                                  self.ctx)
-        self.localiser = Localiser(cfg.mirror, cfg.panorama, settings=cfg.localisation,
-                                   odometry_noise=cfg.odometry)
         self._tmp = tempfile.TemporaryDirectory()
         self.store = MapStore.open(map_path or Path(self._tmp.name) / "map.db",
                                    geometry_checksum(cfg.mirror, cfg.panorama))
         self.mapper = Mapper(self.store, cfg.odometry)
+        self.session = MappingSession(self.mapper, cfg.mapping.acquisition, cfg.localisation)
+        self.localiser = Localiser(cfg.mirror, cfg.panorama, settings=cfg.localisation,
+                                   odometry_noise=cfg.odometry, known_map=self.session.holder)
+        self.events: list[Event] = []  # what the map's owner said, as the daemon publishes
         self.sensors = DeviceSensors(self.camera, self.base, cfg.tbl,
                                      cfg.base.read_timeout_s, on_odometry=self._odometry)
         self.frame_filter = frame_filter
@@ -138,8 +145,7 @@ class Run:
         t0 = time.perf_counter()
         belief = self.localiser.process_frame(frame)
         self.process_s.append(time.perf_counter() - t0)
-        if belief.floor_learned is not None and self.mapper.graph.floor is None:
-            self.mapper.save_floor(belief.floor_learned)  # as the daemon does
+        self.events += self.session.observe(belief)  # as the daemon does
         return frame, belief
 
     def drive(self, dx: float, dy: float, dyaw: float, speed: float) -> Iterator[Belief]:
@@ -167,32 +173,48 @@ class Run:
         truth: list[tuple[float, float, float]] = []
 
         def start(odo: Any) -> None:  # at rest at the reference pose
-            links.extend(self.mapper.begin_place(odo, self.localiser.reliable_estimate()))
+            links.extend(self.session.begin_place(odo, self.localiser.reliable_estimate()))
             truth.append(self.robot.true_pose())
 
         self.localiser.learning(True)  # as the daemon does while a learn job runs
         try:
             tbl = drive_tbl(self.sensors, self.base, self.localiser.unwarper, self.cfg.tbl,
                             on_start=start)
+        except LearningError:  # as the daemon's job ends: nothing stored
+            self.session.cancel_place()
+            self.localiser.learning_not_started()
+            raise
         finally:
             self.localiser.learning(False)
-        stored, added = self.mapper.add_place(
+        learned = self.session.store_place(
             Place(tbl.result(), tbl.reference_panorama, label=label,
-                  local_space=self.localiser.place_profile(tbl.reference_panorama)), links)
-        place = dataclasses.replace(stored, reference_panorama=None)
-        self.localiser.place_learned(place, added)  # as the daemon does
-        for changed in self.mapper.measure_cross_backgrounds(place.id):
-            self.localiser.know_place(changed)
-        for pair in self.mapper.learn_features(place.id, tbl.views, self.cfg.localisation):
-            self.localiser.know_features(pair)
-        self.references[place.id] = SE2.of(truth[0])
-        return place
+                  local_space=self.localiser.place_profile(tbl.reference_panorama)),
+            links, tbl.views)
+        self.events += learned.events
+        self.localiser.place_learned(learned.place.id)  # as the daemon does
+        self.references[learned.place.id] = SE2.of(truth[0])
+        return learned.place
+
+    def restart(self, acquisition: AcquisitionSettings | None = None,
+                saved: SavedPose | None = None) -> Localiser:
+        """The daemon stopped and started again on the same map file: a new Mapper,
+        MappingSession and Localiser (with ``acquisition`` on, as the daemon runs it),
+        resumed from ``saved`` (the pose saved at the stop) as the daemon resumes."""
+        self.mapper = Mapper(self.store, self.cfg.odometry)
+        self.session = MappingSession(self.mapper, self.cfg.mapping.acquisition,
+                                      self.cfg.localisation)
+        with self.mapper.lock:
+            self.localiser = make_localiser(self.cfg, self.session.holder, self.mapper.graph,
+                                            acquisition)
+        if saved is not None:
+            resume(self.localiser, saved)
+        return self.localiser
 
     def restart_localiser(self) -> Localiser:
         """A new Localiser on the map as stored, as the daemon builds one when it starts:
         no pose, so it localises globally (design §9)."""
         with self.mapper.lock:
-            self.localiser = make_localiser(self.cfg, self.mapper.graph)
+            self.localiser = make_localiser(self.cfg, self.session.holder, self.mapper.graph)
         return self.localiser
 
     # ------------------------------------------------------------------ truth

@@ -3,8 +3,9 @@ room (design §6, thesis §7.1).
 
 First pass: the simulated robot (lock-step) drives a ``tour`` of the world; the daemon's
 own pieces run on every frame — the Localiser with autonomous acquisition watching the
-place learned last, Turn Back and Look (``drive_tbl``) when the background is reached,
-the Mapper storing each place with its transition in a real map file. Second pass along
+place learned last, the daemon's MappingSession deciding when to learn and storing what
+each belief and each place changes in a real map file, Turn Back and Look
+(``drive_tbl``) when it asks for a place. Second pass along
 the same tour with the finished map: a frame is *covered* when some place's LRP exceeds
 its background by ``--margin`` (0.05) — the background measured as the robot left the
 place, or for a place it never left (the last of the tour) the map's estimate of it
@@ -35,10 +36,12 @@ from typing import IO, Any
 import numpy as np
 
 from daemon.config import PlacecellConfig, load
+from daemon.localisation.known_map import KnownMap, MapHolder
 from daemon.localisation.localiser import Localiser
 from daemon.mapping.place import Place
 from daemon.service.learning import DeviceSensors, drive_tbl
 from daemon.service.mapper import Link, Mapper
+from daemon.service.mapping_session import MappingSession
 from daemon.store.sqlite_store import MapStore
 from hal.registry import HalContext, create_base, create_camera
 from hal.sim.factory import build_sim_robot
@@ -173,9 +176,11 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
     t_wall = time.perf_counter()
     camera, base, robot = _devices(cfg, scenario)
     acq = dataclasses.replace(cfg.mapping.acquisition, enabled=True)
-    localiser = Localiser(cfg.mirror, cfg.panorama, acquisition=acq)
     store = MapStore.open(map_path, geometry_checksum(cfg.mirror, cfg.panorama))
     mapper = Mapper(store, cfg.odometry)
+    session = MappingSession(mapper, acq, cfg.localisation)
+    localiser = Localiser(cfg.mirror, cfg.panorama, acquisition=acq,
+                          known_map=session.holder)
 
     def odometry(samples: list[Any]) -> None:
         localiser.add_odometry(samples)
@@ -186,7 +191,7 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
     refs: list[tuple[float, float, float]] = []
     learn_s: list[float] = []
     failures, path_m = 0, 0.0
-    retry_at_m: float | None = 0.0  # the first place as soon as possible
+    retry_at_m = 0.0  # after a learn failed: not before this far along the tour
     last_pose = robot.true_pose()
     # The tour's own time, with room to spare, plus each Turn Back and Look's and the
     # pause after it: a long tour learns a hundred places (2800 s of learning).
@@ -200,25 +205,22 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
             belief = localiser.process_frame(frame)
             if trace is not None:
                 trace.write(json.dumps(_traced_first(pose, path_m, belief, localiser)) + "\n")
-            if belief.closed_transition is not None:
-                mapper.add_transition(belief.closed_transition)
-            for place_id, background in belief.backgrounds:
-                mapper.set_background(place_id, background)
-            decision = belief.acquisition
-            due = retry_at_m is not None and path_m >= retry_at_m
-            if decision is None and not due:
+            session.observe(belief)  # as the daemon does with every belief
+            why = session.wants_place(belief, localiser.odometry.latest, job_running=False)
+            if why is None or path_m < retry_at_m:
+                if belief.acquisition is not None:  # not now: acquisition asks again
+                    localiser.learning_not_started()
                 continue
-            if decision is not None:
-                mapper.set_background(decision.place_id, decision.background_lrp)
-                localiser.know_place(mapper.graph.place(decision.place_id))
             links: list[Link] = []
             start_ns = frame.stamp_ns
+            session.learning_started()
             localiser.learning(True)  # as the daemon does while a learn job runs
             try:
                 tbl = drive_tbl(sensors, base, localiser.unwarper, cfg.tbl,
-                                on_start=functools.partial(_begin, mapper, links, localiser))
+                                on_start=functools.partial(_begin, session, links, localiser))
             except LearningError:
-                mapper.cancel_place()
+                session.cancel_place()
+                localiser.learning_not_started()
                 failures += 1
                 retry_at_m = path_m + RETRY_AFTER_M
                 continue
@@ -227,14 +229,11 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
             learn_s.append((robot.now_ns() - start_ns) / 1e9)
             deadline_s += learn_s[-1] + (scenario.resume_after_s or 0.0)
             ref = _reference_pose(robot)
-            stored, added = mapper.add_place(Place(
+            learned = session.store_place(Place(
                 tbl.result(), tbl.reference_panorama, created_unix_s=time.time(),
-                local_space=localiser.place_profile(tbl.reference_panorama)), links)
+                local_space=localiser.place_profile(tbl.reference_panorama)), links, tbl.views)
             refs.append(ref)
-            localiser.place_learned(stored, added)  # as the daemon does after a learn job
-            for changed in mapper.measure_cross_backgrounds(stored.id):
-                localiser.know_place(changed)
-            retry_at_m = None
+            localiser.place_learned(learned.place.id)  # as the daemon does after a learn
             last_pose = robot.true_pose()
         places = mapper.graph.places
         tour_done = robot.autopilot_done()
@@ -268,8 +267,9 @@ def _traced_first(pose: tuple[float, float, float], path_m: float, belief: Any,
                 round(v, 3) for v in belief.pose_in_place]}
 
 
-def _begin(mapper: Mapper, links: list[Link], localiser: Localiser, start: Any) -> None:
-    links.extend(mapper.begin_place(start, localiser.reliable_estimate()))
+def _begin(session: MappingSession, links: list[Link], localiser: Localiser, start: Any
+           ) -> None:
+    links.extend(session.begin_place(start, localiser.reliable_estimate()))
 
 
 def _reference_pose(robot: SimRobot) -> tuple[float, float, float]:
@@ -285,9 +285,9 @@ def _second_pass(cfg: PlacecellConfig, scenario: Scenario, places: list[Place],
     if not places:
         return 0.0, 0
     robot = build_sim_robot(cfg, scenario)
-    localiser = Localiser(cfg.mirror, cfg.panorama, settings=cfg.localisation)
-    for place in places:  # with the backgrounds the first pass measured
-        localiser.know_place(place)
+    # The finished map, with the backgrounds the first pass measured.
+    localiser = Localiser(cfg.mirror, cfg.panorama, settings=cfg.localisation,
+                          known_map=MapHolder(KnownMap.of(places)))
     rng = np.random.default_rng(args.seed)
     covered = total = 0
     step_ns = int(1e9 / 50)

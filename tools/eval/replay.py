@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from daemon.config import load
-from daemon.service.pipeline import make_localiser
+from daemon.service.pipeline import holder_of, make_localiser
 from daemon.store.sqlite_store import MapStore
 from hal.recording import (
     TOPIC_FRAMES,
@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     with MapStore.open(args.map, geometry_checksum(cfg.mirror, cfg.panorama),
                        readonly=True) as store:
         graph = store.load()
-    localiser = make_localiser(cfg, graph)
+    localiser = make_localiser(cfg, holder_of(graph), graph)
     reader = RecordingReader(args.recording)
     frames: list[Any] = []
     odometry: list[Any] = []

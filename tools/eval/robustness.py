@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from daemon.config import load
+from daemon.localisation.known_map import KnownMap, MapHolder
 from daemon.localisation.localiser import Localiser
 from daemon.mapping.place import Place
 from hal.sim.render import Person
@@ -32,9 +33,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     world = f"generate:office:{args.world_seed}"
     xs = np.linspace(3.0, 27.0, args.places)
     places = [learn(world, (float(x), 10.0, 0.0), args.seed) for x in xs]
-    localiser = Localiser(config.mirror, config.panorama, settings=config.localisation)
-    for k, p in enumerate(places):  # the daemon's recognition of the places
-        localiser.know_place(Place(p.tbl, None, id=k + 1))
+    # The daemon's recognition of the places.
+    known = KnownMap.of(Place(p.tbl, None, id=k + 1) for k, p in enumerate(places))
+    localiser = Localiser(config.mirror, config.panorama, settings=config.localisation,
+                          known_map=MapHolder(known))
     ids = list(range(1, len(places) + 1))
     rng = np.random.default_rng(args.seed)
     gains: dict[float, list[float]] = {0.5: [], 1.5: []}

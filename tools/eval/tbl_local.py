@@ -96,7 +96,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     with Run(cfg, frame_filter=frame_filter) as r:
         place = r.learn("tbl-local")
         if args.misassociate:
-            r.localiser.know_place(misassociated(place, args.misassociate, rng))
+            wrong = misassociated(place, args.misassociate, rng)  # a fault put in the map
+            r.localiser.known_map.replace(lambda m: m.with_places([wrong]))
         r.localiser.set_pose(place.id, (0.0, 0.0, 0.0), 0.1)
         odo0 = r.robot.odometry_pose()
         for _ in range(args.crosses):

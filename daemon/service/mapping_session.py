@@ -1,0 +1,233 @@
+"""The one place where the map changes (design §6): what a belief, a learned place or a
+closed cycle does to it, for the daemon and for every experiment alike.
+
+The map has one owner, as RTAB-Map's ``Memory`` owns its map while ``Rtabmap::process``
+drives: the session holds the :class:`~daemon.service.mapper.Mapper` (the map file and
+the graph the queries read) and the :class:`~daemon.localisation.known_map.MapHolder`
+the localiser reads, and every change goes through it to both — stored first, then
+shown to the localiser as a new snapshot. Callers (the daemon's processing thread and
+learn job, ``tools/eval/lockstep.py``) hand it beliefs and learned places and publish the
+events it returns; they keep no copy of the map.
+
+In localisation mode the map is read only: a belief changes nothing (a closed cycle, a
+background measured are logged and dropped) and no place is learned.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from daemon.localisation.belief import Belief
+from daemon.localisation.known_map import KnownMap, MapHolder
+from daemon.localisation.settings import LocalisationSettings
+from daemon.mapping.place import Place
+from daemon.mapping.settings import AcquisitionSettings
+from daemon.mapping.transition import Transition
+from daemon.mapping.unmapped import UnmappedWatch
+from daemon.service.mapper import Link, Mapper, Seen
+from kernel.errors import PlacecellError
+from kernel.types import Odometry
+
+log = logging.getLogger(__name__)
+
+Mode = Literal["mapping", "localisation"]
+# What a change of the map tells subscribers: (event kind, fields), design §11.
+Event = tuple[str, dict[str, Any]]
+
+
+@dataclass(frozen=True)
+class Learned:
+    """A place stored by :meth:`MappingSession.store_place`."""
+
+    place: Place  # without its reference panorama
+    transitions: list[Transition]  # its transitions, both ways
+    lookalikes: list[int] = field(default_factory=list)  # places it was told apart from
+    events: list[Event] = field(default_factory=list)
+
+
+def segment_events(new_place: int | None, before: dict[int, int], after: dict[int, int],
+                   by: dict[str, Any]) -> list[Event]:
+    """What a change of the map did to its segments (design §6): a place learned with
+    no transition starts one; a transition between two joins them."""
+    count = len(set(after.values()))
+    events: list[Event] = []
+    if new_place is not None and after.get(new_place) == new_place and before \
+            and list(after.values()).count(new_place) == 1:
+        events.append(("segment_started", {
+            "place": new_place, "segments": count,
+            "reason": "learned with no transition to a known place: unmapped space, or the "
+                      "robot's pose was unknown"}))
+    merged: dict[int, set[int]] = {}
+    for place, segment in before.items():
+        if place in after:
+            merged.setdefault(after[place], set()).add(segment)
+    for segment, parts in sorted(merged.items()):
+        if len(parts) > 1:
+            log.info("segments %s joined into segment %d (%d left)", sorted(parts), segment,
+                     count)
+            events.append(("segments_joined", {"segment": segment, "joined": sorted(parts),
+                                               "segments": count, "by": by}))
+    return events
+
+
+class MappingSession:
+    """The map's owner (module docstring). ``mode`` may change while it runs (cmd/mode)."""
+
+    def __init__(self, mapper: Mapper, acquisition: AcquisitionSettings,
+                 localisation: LocalisationSettings, mode: Mode = "mapping") -> None:
+        self.mapper = mapper
+        self.acquisition = acquisition
+        self.localisation = localisation
+        self.mode: Mode = mode
+        self._lock = threading.Lock()  # one change of the map at a time
+        with mapper.lock:
+            graph = mapper.graph
+            self.holder = MapHolder(KnownMap.of(graph.places, graph.transitions,
+                                                graph.features))
+        self.unmapped = UnmappedWatch(acquisition)
+
+    @property
+    def known(self) -> KnownMap:
+        """The map as the localiser reads it now."""
+        return self.holder.current
+
+    @property
+    def mapping(self) -> bool:
+        return self.mode == "mapping"
+
+    # ------------------------------------------------------------ per frame
+    def observe(self, belief: Belief) -> list[Event]:
+        """What this frame's belief does to the map: the floor model learned, backgrounds
+        measured as the robot left places, a cycle closed (§7.1.3), the watched place's
+        background reached (design §6). Returns the events to publish."""
+        if not self.mapping:
+            if belief.closed_transition is not None:
+                t = belief.closed_transition
+                log.info("cycle %d -> %d measured; not stored in localisation mode",
+                         t.from_id, t.to_id)
+            return []
+        events: list[Event] = []
+        mapper = self.mapper
+        if belief.floor_learned is not None and mapper.graph.floor is None:
+            mapper.save_floor(belief.floor_learned)
+            log.info("floor model learned from the first colour frame and stored with the "
+                     "map (gradient threshold %.3f)", belief.floor_learned.gradient_threshold)
+        backgrounds = list(belief.backgrounds)
+        if belief.acquisition is not None:
+            backgrounds.append((belief.acquisition.place_id,
+                                belief.acquisition.background_lrp))
+        for place_id, background in backgrounds:
+            self._set_background(place_id, background)
+        for place_id, background in belief.backgrounds:
+            events.append(("background_measured", {"place": place_id,
+                                                   "background_lrp": round(background, 4)}))
+        decision = belief.acquisition
+        if decision is not None:
+            events.append(("background_reached", {"place": decision.place_id,
+                                                  "lrp": round(decision.lrp, 4),
+                                                  "distance_m": round(decision.distance_m, 3)}))
+        if belief.closed_transition is not None:
+            events += self.add_cycle(belief.closed_transition)
+        return events
+
+    def _set_background(self, place_id: int, background: float) -> None:
+        with self._lock:
+            self.mapper.set_background(place_id, background)
+            if place_id in self.holder.current:
+                self.holder.replace(lambda m: m.with_background(place_id, background))
+
+    def add_cycle(self, transition: Transition) -> list[Event]:
+        """A cycle closed by local estimates in both places (design §6, §7.1.3): stored,
+        and the `map` frame embedded again."""
+        if not self.mapping:
+            return []
+        with self._lock:
+            before = dict(self.mapper.segment_of)
+            try:
+                self.mapper.add_transition(transition)
+            except (PlacecellError, KeyError) as e:
+                log.error("could not store the cycle's transition: %s", e)
+                return []
+            self.holder.replace(lambda m: m.with_transitions([transition]))
+            after = dict(self.mapper.segment_of)
+        m = transition.T_from_to.mean
+        ends = {"from": transition.from_id, "to": transition.to_id}
+        return [*segment_events(None, before, after, ends),
+                ("transition_added", {"source": "cycle", "x": round(m.x, 4),
+                                      "y": round(m.y, 4), "yaw": round(m.yaw, 5), **ends})]
+
+    # ------------------------------------------------------------ the autopilot
+    def wants_place(self, belief: Belief, latest_odometry: Odometry | None,
+                    job_running: bool) -> str | None:
+        """Why autonomous acquisition learns a place now (design §6), None: not now. The
+        first place on an empty map as soon as the robot can learn; then each time the
+        watched place's background is reached while the robot is tracked; and, on a map
+        with places, in unmapped space after a search that found nothing (a new
+        segment: a restart resumes, it never re-learns)."""
+        lost_in_unmapped_space = self.unmapped.observe(
+            belief.state in ("tracking", "uninitialised") or job_running, latest_odometry)
+        decision = belief.acquisition
+        if not self.mapping or not self.acquisition.enabled or job_running \
+                or not belief.odometry_ok or (decision is not None
+                                              and belief.state != "tracking"):
+            return None
+        if decision is not None:
+            return f"place {decision.place_id}'s background reached"
+        if self.mapper.place_count() == 0:
+            return "the first one"
+        if not lost_in_unmapped_space:
+            return None
+        # A segment of its own: no odometry link to the last place (the robot may have
+        # been carried), none from an estimate.
+        why = (f"unmapped space: no known place found in {self.unmapped.frames} frames "
+               f"over {self.unmapped.travelled_m:.2f} m; a new segment")
+        self.mapper.odometry_restarted()
+        return why
+
+    def learning_started(self) -> None:
+        self.unmapped.reset()
+
+    # ------------------------------------------------------------ learning
+    def begin_place(self, reference: Odometry, seen: Seen | None) -> list[Link]:
+        """A place is being learned at the pose where odometry read ``reference``
+        (Mapper.begin_place)."""
+        return self.mapper.begin_place(reference, seen)
+
+    def cancel_place(self) -> None:
+        self.mapper.cancel_place()
+
+    def store_place(self, place: Place, links: list[Link], views: list[np.ndarray],
+                    on_stored: Callable[[Place], None] = lambda _: None) -> Learned:
+        """A place just learned: stored with its transitions, then its backgrounds in
+        other places' views and its look-alikes' features (design §5, §9), then shown
+        to the localiser. ``on_stored``: called once the place itself is in the map file
+        (a failure after that loses only cues that can be redone)."""
+        if not self.mapping:
+            raise PlacecellError("the map is read-only in localisation mode")
+        with self._lock:
+            before = dict(self.mapper.segment_of)
+            stored, transitions = self.mapper.add_place(place, links)
+            on_stored(stored)
+            changed: list[Place] = []
+            pairs = []
+            try:
+                changed = self.mapper.measure_cross_backgrounds(stored.id)
+                pairs = self.mapper.learn_features(stored.id, views, self.localisation)
+            except Exception:  # noqa: BLE001 - the place is stored; cues can be redone
+                log.exception("place %d: its backgrounds or look-alikes' features were not "
+                              "found", stored.id)
+            self.holder.replace(lambda m: m.with_places([stored, *changed])
+                                .with_transitions(transitions).with_features(pairs))
+            after = dict(self.mapper.segment_of)
+        events = segment_events(stored.id, before, after, {"place_learned": stored.id})
+        events += [("transition_added", {"source": t.source, "from": t.from_id,
+                                         "to": t.to_id})
+                   for t in transitions if t.from_id == stored.id]
+        return Learned(stored, transitions, [p.b_id for p in pairs], events)
+

@@ -1,0 +1,115 @@
+"""The map's one owner (daemon/service/mapping_session.py): what a belief, a learned place
+and a closed cycle do to the map file and to the map the localiser reads, in each mode;
+and when the autopilot learns. A real SQLite map file; crafted places and beliefs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from daemon.localisation.belief import Belief
+from daemon.localisation.settings import LocalisationSettings
+from daemon.mapping.acquisition import AcquisitionDecision
+from daemon.mapping.settings import AcquisitionSettings, OdometryNoiseSettings
+from daemon.mapping.transition import Transition
+from daemon.service.mapper import Link, Mapper
+from daemon.service.mapping_session import MappingSession
+from daemon.store.sqlite_store import MapStore
+from kernel.errors import PlacecellError
+from kernel.se2 import SE2, UncertainSE2
+from kernel.types import Odometry
+from tests.map_fixtures import synthetic_place
+
+GEOMETRY = "abc123"
+T = UncertainSE2(SE2(1.5, 0.0, 0.0), np.diag([0.01, 0.01, 0.001]))
+
+
+def _session(path: Path, mode: str = "mapping", **acquisition: object) -> MappingSession:
+    mapper = Mapper(MapStore.open(path, GEOMETRY), OdometryNoiseSettings())
+    return MappingSession(mapper, AcquisitionSettings(enabled=True, **acquisition),
+                          LocalisationSettings(max_lookalikes=0), mode)  # type: ignore[arg-type]
+
+
+def _belief(state: str = "tracking", **fields: object) -> Belief:
+    return Belief(stamp_ns=1, state=state, reason="", odometry_ok=True,  # type: ignore[arg-type]
+                  **fields)  # type: ignore[arg-type]
+
+
+def _two_segments(session: MappingSession) -> tuple[int, int]:
+    rng = np.random.default_rng(3)
+    a = session.store_place(synthetic_place(rng, "a", n=4, width=64, height=24, margin=0),
+                            [], [])
+    b = session.store_place(synthetic_place(rng, "b", n=4, width=64, height=24, margin=0),
+                            [], [])
+    assert [e[0] for e in a.events] == []  # the first place of a map starts nothing new
+    assert [e[0] for e in b.events] == ["segment_started"]
+    return a.place.id, b.place.id
+
+
+def test_a_place_is_in_the_file_and_in_the_localisers_map_with_its_transitions(
+        tmp_path: Path) -> None:
+    session = _session(tmp_path / "map.db")
+    a, _ = _two_segments(session)
+    rng = np.random.default_rng(4)
+    c = session.store_place(synthetic_place(rng, "c", n=4, width=64, height=24, margin=0),
+                            [Link(a, T)], [])
+    assert [(e[0], e[1]["from"], e[1]["to"]) for e in c.events] == [
+        ("transition_added", c.place.id, a)]
+    known = session.known
+    assert c.place.id in known and known.neighbours(a)[c.place.id].mean.x == 1.5
+    with MapStore.open(tmp_path / "map.db", GEOMETRY, readonly=True) as store:
+        graph = store.load()
+    assert graph.transition(c.place.id, a) is not None and len(graph) == 3
+
+
+def test_a_closed_cycle_joins_segments_in_the_file_and_the_map_read(tmp_path: Path) -> None:
+    session = _session(tmp_path / "map.db")
+    a, b = _two_segments(session)
+    events = session.observe(_belief(closed_transition=Transition(a, b, T, "cycle"),
+                                     backgrounds=((a, 0.42),)))
+    kinds = [e[0] for e in events]
+    assert kinds == ["background_measured", "segments_joined", "transition_added"]
+    assert session.known.neighbours(b)[a].mean.x == pytest.approx(-1.5)
+    assert session.known.place(a).background_lrp == 0.42
+    assert set(session.mapper.segment_of.values()) == {a}
+    with MapStore.open(tmp_path / "map.db", GEOMETRY, readonly=True) as store:
+        graph = store.load()
+    assert graph.transition(a, b) is not None and graph.place(a).background_lrp == 0.42
+
+
+def test_localisation_mode_changes_nothing_and_learns_nothing(tmp_path: Path) -> None:
+    session = _session(tmp_path / "map.db")
+    a, b = _two_segments(session)
+    before = session.known
+    session.mode = "localisation"
+    decision = AcquisitionDecision(a, 0.5, 1.0, 0.5)
+    belief = _belief(closed_transition=Transition(a, b, T, "cycle"), backgrounds=((a, 0.4),),
+                     acquisition=decision)
+    assert session.observe(belief) == []
+    assert session.known is before
+    assert session.wants_place(belief, None, job_running=False) is None
+    with pytest.raises(PlacecellError, match="read-only"):
+        session.store_place(synthetic_place(np.random.default_rng(5)), [], [])
+    with MapStore.open(tmp_path / "map.db", GEOMETRY, readonly=True) as store:
+        graph = store.load()
+    assert graph.transition(a, b) is None and graph.place(a).background_lrp is None
+
+
+def test_the_autopilot_learns_the_first_place_a_faded_one_and_in_unmapped_space(
+        tmp_path: Path) -> None:
+    session = _session(tmp_path / "map.db", unmapped_after_frames=5, unmapped_after_m=0.3)
+    assert session.wants_place(_belief("uninitialised"), None, False) == "the first one"
+    assert session.wants_place(_belief("uninitialised"), None, True) is None  # a job runs
+    a, _ = _two_segments(session)
+    decision = AcquisitionDecision(a, 0.5, 1.0, 0.5)
+    assert session.wants_place(_belief(acquisition=decision), None, False) \
+        == f"place {a}'s background reached"
+    assert session.wants_place(_belief("lost", acquisition=decision), None, False) is None
+    assert session.wants_place(_belief("relocalising"), None, False) is None  # a restart
+    assert session.wants_place(_belief(), None, False) is None  # tracking: counts restart
+    whys = [session.wants_place(_belief("relocalising"),
+                                Odometry(0.05 * k, 0.0, 0.0, k, k), False) for k in range(9)]
+    assert whys[:6] == [None] * 6  # searched 5 frames at k = 4, but 0.3 m only at k = 6
+    assert whys[6] is not None and whys[6].startswith("unmapped space")
