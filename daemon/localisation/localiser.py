@@ -5,7 +5,7 @@ odometry motion since the previous frame, track the current place's landmarks an
 the particle filter with them (daemon/localisation/local_positioning.py), and every few
 frames recognise the current place's neighbours and, in turn, other places to pass the
 estimate on or close a cycle (daemon/localisation/place_switching.py); autonomous place
-acquisition watches the place learned last (daemon/mapping/acquisition.py). The grey
+acquisition watches the place learned last (daemon/localisation/acquisition_watch.py). The grey
 panorama and its preparation for matching are computed once per frame and shared.
 
 Global localisation (design §9, daemon/localisation/global_localisation.py): with no pose
@@ -33,6 +33,7 @@ from typing import Literal
 
 import numpy as np
 
+from daemon.localisation.acquisition_watch import AcquisitionWatch, Tracked, WatchStep
 from daemon.localisation.belief import (
     Belief,
     BeliefState,
@@ -47,17 +48,12 @@ from daemon.localisation.odometry import OdometryBuffer, relative_motion
 from daemon.localisation.place_switching import (
     CycleClosure,
     PlaceSwitcher,
-    nearest_place,
-    places_near,
     reliable,
 )
 from daemon.localisation.sensor_models import make_model
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.acquisition import (
     AcquisitionDecision,
-    BackgroundMeter,
-    PlaceAcquisition,
-    taken_over,
 )
 from daemon.mapping.odometry_chain import OdometryChain
 from daemon.mapping.settings import AcquisitionSettings, OdometryNoiseSettings
@@ -65,7 +61,7 @@ from daemon.mapping.transition import Transition
 from daemon.vision.disambiguation import Feature, choose
 from daemon.vision.floor import FloorModel
 from daemon.vision.local_space import CAP_M, LocalSpace, match_many
-from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
+from daemon.vision.recognition import FastMatcher, PreparedPanorama
 from daemon.vision.signature import signature, similarity
 from daemon.vision.unwarp import Unwarper
 from kernel.errors import PlacecellError
@@ -146,16 +142,14 @@ class Localiser:
         self._last_odometry: Odometry | None = None
         self._last_stamp_ns: int | None = None
         self.matcher = FastMatcher()
-        self.acquisition = PlaceAcquisition(acquisition) if acquisition is not None \
-            and acquisition.enabled else None
-        self._watched: tuple[int, PreparedTemplates] | None = None
-        self._awaiting_place = False  # a decision was made: the new place comes next
+        # Autonomous acquisition's watch (design §6), when enabled.
+        self.watch = AcquisitionWatch(acquisition, self.matcher,
+                                      self.unwarper.panorama.wrap_margin,
+                                      self.settings.background_lrp) \
+            if acquisition is not None and acquisition.enabled else None
         self._learning = False  # a place is being learned (see learning())
-        self._watched_learned = False  # learned where it began to be watched (its reference)
-        self._watch_next: int | None = None  # set from other threads
         self._holder = known_map or MapHolder()
         self.map: KnownMap = self._holder.current  # the snapshot this frame reads
-        self._meters: list[BackgroundMeter] = []  # places being left behind
         self.rng = np.random.default_rng(self.settings.seed)
         self.model = make_model(self.settings)
         self.tracker: PlaceTracker | None = None
@@ -195,7 +189,8 @@ class Localiser:
     def watch_place(self, place_id: int) -> None:
         """Autonomous acquisition watches ``place_id`` (the one just learned, already in
         the map) from the next frame on. Safe to call from another thread."""
-        self._watch_next = place_id
+        if self.watch is not None:
+            self.watch.watch_next(place_id)
 
     def learning(self, driving: bool) -> None:
         """A place is being learned (``driving``: the robot drives the Turn Back and Look
@@ -209,7 +204,8 @@ class Localiser:
         the daemon had a job already): acquisition watches the place the robot is
         tracked in again, and asks again once that one has faded. Safe to call from
         another thread."""
-        self._awaiting_place = False
+        if self.watch is not None:
+            self.watch.not_started()
 
     def place_learned(self, place_id: int) -> None:
         """A place just learned and in the map with its transitions: acquisition watches
@@ -355,14 +351,16 @@ class Localiser:
                             OdometryChain(odo, self.odometry_noise))
         timings["recognition"] = (time.perf_counter() - t2) * 1e3
         t3 = time.perf_counter()
-        recent, recent_lrp, decision, background = self._acquire(prepare, grey, odo)
-        revisited = None if decision is not None or recent_lrp is None else \
-            self._revisit(prepare, grey, recent_lrp)
-        if revisited is not None:
-            recent, recent_lrp = revisited.place_id, revisited.lrp
-            if self.tracker is not None and self.tracker.estimate is not None \
-                    and self.mode == "track":  # else the search finds the place itself
-                switched_from = self._move_to(revisited.place_id, grey, odo)
+        watched = WatchStep() if self.watch is None else self.watch.observe(
+            self.map, prepare, grey, odo, self._tracked(),
+            lambda ids: self._score_many(prepare(), ids, estimated=True))
+        recent, recent_lrp = watched.recent, watched.recent_lrp
+        decision, background, revisited = watched.decision, watched.backgrounds, \
+            watched.revisited
+        if revisited is not None and self.tracker is not None \
+                and self.tracker.estimate is not None \
+                and self.mode == "track":  # else the search finds the place itself
+            switched_from = self._move_to(revisited.place_id, grey, odo)
         timings["acquisition"] = (time.perf_counter() - t3) * 1e3
         timings["total"] = (time.perf_counter() - t0) * 1e3
         return self._belief(frame.stamp_ns, odo is not None, motion, local, scores,
@@ -788,102 +786,13 @@ class Localiser:
                       confidence=confidence, particles=len(tracker.filter.particles),
                       event=event, **common)  # type: ignore[arg-type]
 
-    def _acquire(self, prepare: Callable[[], PreparedPanorama], grey: np.ndarray,
-                 odo: Odometry | None) -> tuple[
-            int | None, float | None, AcquisitionDecision | None, tuple[tuple[int, float], ...]]:
-        """The watched place's LRP in this frame, whether to learn a new place, and a
-        background LRP measured as the robot left a place behind."""
-        if self.acquisition is None or self.panorama is None:
-            return None, None, None, ()
-        learned, self._watch_next = self._watch_next, None  # set from other threads
-        if learned is not None and learned in self.map:
-            self._watch(learned, learned=True)
-            self._awaiting_place = False
-        if self._watched is None and not self._awaiting_place and self.mode == "track" \
-                and self.tracker is not None:
-            # Nothing watched and no place coming: after a restart on a map with places,
-            # or a decision whose learn did not happen. The place the robot is tracked
-            # in is watched from here, so acquisition goes on (never a "first" place on
-            # a map that has places: issue 31).
-            self._watch(self.tracker.place.id, learned=False)
-        if self._watched is None and not self._meters:
-            return None, None, None, ()
-        prepared = prepare()
-        background = self._measure_backgrounds(prepared, odo)
-        if self._watched is None:
-            return None, None, None, background
-        place_id, templates = self._watched
-        lrp = self.matcher.lrp(prepared, templates)
-        # Asked every frame: the place's estimates come in after it is learned.
-        self.acquisition.expected_background = self._expected_background(place_id)
-        decision = self.acquisition.observe(lrp, odo)
-        if decision is None:
-            return place_id, lrp, None, background
-        # The watched place is behind us: measure the level its LRP settles at...
-        acq = self.acquisition.settings
-        self._meters.append(BackgroundMeter(
-            place_id, acq.background_window_m, acq.background_skip_m, decision.origin,
-            decision.away_m))
-        # ...and back on a known path another place may be recognised here (the most
-        # likely place, §7.1): watch that one instead of learning.
-        known = self._most_likely(prepared, grey, exclude=place_id)
-        if known is None:
-            known = self._crowded(acq.min_distance_m,
-                                  exclude=place_id if self._watched_learned else None)
-        if known is not None:
-            self._watch(known, learned=False)
-            return place_id, lrp, None, background
-        self._watched = None  # until the new place is learned and watched
-        self._awaiting_place = True
-        self.acquisition.reset(None)
-        return place_id, lrp, decision, background
-
-    def _revisit(self, prepare: Callable[[], PreparedPanorama], grey: np.ndarray,
-                 watched_lrp: float) -> PlaceScore | None:
-        """Back at a known place that neither acquisition nor the tracker watches (design
-        §6): the ``revisit_candidates`` places whose signatures are most like the view
-        are recognised in every frame, and one standing ``certain_lead`` above its
-        background, and above the watched place, is where the robot is: acquisition
-        watches it from here (and the caller has the tracker start in it). Without this
-        a tour coming back along a corridor never recognised the places of its first
-        pass there: the tracker followed the new places, and the map's long chain put
-        the old ones metres away (office 3: new places learned 0.29 and 0.41 m from old
-        ones, the robot passing within 0.01 m of one)."""
-        assert self.acquisition is not None and self._watched is not None
-        acq = self.acquisition.settings
-        watched = self._watched[0]
-        tracked = self.tracker.place.id if self.tracker is not None else None
-        top = self._most_like_view(grey, [p for p in self.map.places
-                                          if p not in (watched, tracked)])
-        if not top:
-            return None
-        best = max(self._score_many(prepare(), top, estimated=True), key=lambda sc: sc.lead)
-        watched_lead = watched_lrp - self._background(watched, estimated=True)
-        if best.lead < max(acq.certain_lead, watched_lead):
-            return None
-        self._watch(best.place_id, learned=False)
-        return best
-
-    def _watch(self, place_id: int, learned: bool) -> None:
-        """Acquisition watches ``place_id`` from here: ``learned`` there (its reference
-        is where the watch begins), or a known place taken over."""
-        assert self.acquisition is not None
-        self._watched = (place_id, self.map.places[place_id].templates)
-        self._watched_learned = learned
-        self.acquisition.reset(place_id)
-
-    def _most_like_view(self, grey: np.ndarray, candidates: list[int]) -> list[int]:
-        """The ``revisit_candidates`` of ``candidates`` whose signatures are most like the
-        view (design §9's cue), most like first; places without a signature left out."""
-        assert self.acquisition is not None
-        k = self.acquisition.settings.revisit_candidates
-        signed = [p for p in candidates if self.map.places[p].place.signature is not None]
-        if not signed or k == 0:
-            return []
-        here = signature(grey, self.unwarper.panorama.wrap_margin)
-        cue = similarity(here, np.stack([self.map.places[p].place.signature  # type: ignore[misc]
-                                         for p in signed]))
-        return [signed[i] for i in np.argsort(-cue)[:k]]
+    def _tracked(self) -> Tracked:
+        """What the tracker says in this frame, for the acquisition watch."""
+        tracker = self.tracker
+        tracking = tracker is not None and self.mode == "track"
+        estimate = None if tracker is None else tracker.estimate
+        return Tracked(self.map, None if tracker is None else tracker.place.id, tracking,
+                       estimate.pose if tracking and estimate is not None else None)
 
     def _move_to(self, place_id: int, grey: np.ndarray, odo: Odometry | None) -> int:
         """Track in ``place_id`` from here, REVISIT_SIGMA_M around its reference (the
@@ -904,85 +813,6 @@ class Localiser:
         self.tracker = tracker
         self.loss.reset()
         return current
-
-    def _expected_background(self, place_id: int) -> float | None:
-        """The background LRP the watched place is expected to settle at: measured if it
-        is already, else its estimate in other places' views on the map's own-view level
-        (daemon/mapping/backgrounds.py), else in its own view; None: none of them.
-        The estimate is the place's own: on office 1's 93 places it came within 0.013 of
-        the background measured later (mean absolute error), the map's median within
-        0.044 — a place whose background stands high would be left too late."""
-        return self.map.estimated_background(place_id)
-
-    def _crowded(self, within_m: float, exclude: int | None) -> int | None:
-        """The place the map puts nearest the tracked estimate, if nearer than
-        ``within_m``: no new place is learned there, that one is watched instead —
-        ``min_distance_m`` holds for every place, not only the last (corridor 1's way back
-        learned places 0.23 m from known ones standing too little above their high,
-        aliased backgrounds to be taken over). The watched place ``exclude`` is left out:
-        odometry has put the robot far enough from it, where the tracked estimate may lag
-        by centimetres — only a place learned there: one taken over was first watched
-        wherever it stood out, maybe a metre before its reference, and the robot may pass
-        it on the way (office 3 learned a place 0.48 m from one it had taken over 1.01 m
-        before it). None: not tracking, or no place so near."""
-        around = self._estimate_in_map()
-        if around is None:
-            return None
-        current, pose, through = around
-        nearest = nearest_place(current, pose, through, exclude)
-        return nearest[0] if nearest is not None and nearest[1] < within_m \
-            and nearest[0] in self.map.places else None
-
-    def _near_estimate(self, within_m: float) -> set[int] | None:
-        """The places the map's transitions put within ``within_m`` of the tracked
-        estimate, and those no path of transitions reaches (nothing to rule them out);
-        None: not tracking, nothing to go by."""
-        around = self._estimate_in_map()
-        if around is None:
-            return None
-        current, pose, through = around
-        unreached = {p for p in self.map.places if p != current and p not in through}
-        return unreached | places_near(current, pose, through, within_m)
-
-    def _estimate_in_map(self) -> tuple[int, tuple[float, float, float],
-                                        dict[int, UncertainSE2]] | None:
-        """The tracked place, the estimate in it, and T_current_p of every place the
-        map's transitions reach from it; None: not tracking."""
-        tracker = self.tracker
-        if tracker is None or tracker.estimate is None or self.mode != "track":
-            return None
-        current = tracker.place.id
-        return current, tracker.estimate.pose, self.map.through_graph(current)
-
-    def _measure_backgrounds(self, prepared: PreparedPanorama, odo: Odometry | None
-                             ) -> tuple[tuple[int, float], ...]:
-        done: list[tuple[int, float]] = []
-        for meter in list(self._meters):
-            known = self.map.places.get(meter.place_id)
-            if known is None:
-                self._meters.remove(meter)
-                continue
-            value = meter.observe(self.matcher.lrp(prepared, known.templates), odo)
-            if value is not None:  # the map's owner stores it (Belief.backgrounds)
-                self._meters.remove(meter)
-                done.append((meter.place_id, value))
-        return tuple(done)
-
-    def _most_likely(self, prepared: PreparedPanorama, grey: np.ndarray, exclude: int
-                     ) -> int | None:
-        """The known place to watch instead of learning a new one here, if any
-        (``taken_over``): each place's lead is its LRP minus its own background,
-        estimated until measured (§9.2, design §6). Recognised: the places the map puts
-        near the estimate, and of the others those most like the view (as for a
-        revisit), which count only by ``certain_lead``."""
-        assert self.acquisition is not None
-        near = self._near_estimate(self.acquisition.settings.known_within_m)
-        ids = [p for p in self.map.places if p != exclude and (near is None or p in near)]
-        ids += self._most_like_view(grey, [p for p in self.map.places
-                                           if p != exclude and p not in ids])
-        scores = self._score_many(prepared, ids, estimated=True)
-        return taken_over({sc.place_id: sc.lead for sc in scores}, self.acquisition.settings,
-                          near)
 
 
 def _merged(*groups: tuple[PlaceScore, ...] | list[PlaceScore]) -> tuple[PlaceScore, ...]:

@@ -42,6 +42,7 @@ from daemon.service.learn_job import (
 )
 from daemon.service.live_view import TOPICS, LiveScene, Sink
 from daemon.service.map_file import open_map
+from daemon.service.map_queries import MapQueries
 from daemon.service.mapper import Mapper, Seen
 from daemon.service.mapping_session import Event, MappingSession
 from daemon.service.notify import Notifier
@@ -49,7 +50,6 @@ from daemon.service.pipeline import make_localiser, resume
 from daemon.service.ros2 import Ros2PosePublisher
 from daemon.service.supervisor import Supervisor, describe
 from daemon.store.sqlite_store import SavedPose
-from daemon.vision.drawing import draw_landmarks
 from daemon.vision.unwarp import Unwarper
 from hal.registry import HalContext, create_base, create_camera
 from kernel.errors import PlacecellError
@@ -90,6 +90,7 @@ class Daemon:
             self.map.close()
             raise
         self._unwarper = Unwarper(config.mirror, config.panorama)
+        self._map_queries = MapQueries(self.robot, self.mapper)
         self._job_lock = threading.Lock()
         self._job: LearnJob | None = None
         self._queryables: list[Any] = []
@@ -208,9 +209,9 @@ class Daemon:
                    ("cmd/set_pose", self._answer_set_pose),
                    ("cmd/relocalise", self._answer_relocalise),
                    ("cmd/mode", self._answer_mode),
-                   ("map/places", self._answer_places),
-                   ("map/transitions", self._answer_transitions),
-                   ("map/place/**", self._answer_place))
+                   ("map/places", self._map_queries.places),
+                   ("map/transitions", self._map_queries.transitions),
+                   ("map/place/**", self._map_queries.place))
         for leaf, handler in answers:
             self._queryables.append(s.declare_queryable(
                 zenoh_link.key(self.robot, leaf), queries.guarded(leaf, handler)))
@@ -468,50 +469,6 @@ class Daemon:
             log.info("mode %s -> %s at the operator's request", previous, self.mode)
             self.publish_event("mode_changed", mode=self.mode, previous=previous)
         query.reply(query.key_expr, api.result(mode=self.mode))
-
-    # ------------------------------------------------------------------ map
-    def _answer_place(self, query: zenoh.Query) -> None:
-        """map/place/<id> (metadata) and map/place/<id>/panorama (PNG, landmarks drawn)."""
-        api.parse(api.NoParameters, queries.payload(query), "map/place")
-        prefix = zenoh_link.key(self.robot, "map/place/")
-        rest = str(query.key_expr).removeprefix(prefix).split("/")
-        if len(rest) not in (1, 2) or (len(rest) == 2 and rest[1] != "panorama"):
-            raise api.RequestError(api.ErrorCode.BAD_REQUEST,
-                                   f"{queries.shorter(query.key_expr)}: ask for "
-                                   f"{prefix}<id> or {prefix}<id>/panorama")
-        place_id = api.place_id(rest[0], "map/place")
-        if not self.mapper.has_place(place_id):
-            raise api.RequestError(api.ErrorCode.NOT_FOUND, f"place {place_id} is not in "
-                                   f"the map ({self.mapper.place_count()} places)")
-        if len(rest) == 2:
-            place = self.mapper.place(place_id, panorama=True)
-            assert place.reference_panorama is not None
-            ok, png = cv2.imencode(".png", draw_landmarks(place.reference_panorama,
-                                                         place.landmarks))
-            if not ok:
-                raise api.RequestError(api.ErrorCode.FAILED, "could not encode the PNG")
-            query.reply(query.key_expr, png.tobytes(), encoding=zenoh.Encoding.IMAGE_PNG)
-            return
-        query.reply(query.key_expr, zenoh_link.encode(
-            "placecell.place", wire.place_body(self.mapper.place(place_id),
-                                           self.mapper.neighbours(place_id))))
-
-    def _answer_places(self, query: zenoh.Query) -> None:
-        api.parse(api.NoParameters, queries.payload(query), "map/places")
-        places = [{"id": p.id, "label": p.label, "created_unix_s": p.created_unix_s,
-                   "landmarks": p.landmark_count, "background_lrp": p.background_lrp}
-                  for p in self.mapper.summaries()]
-        query.reply(query.key_expr, zenoh_link.encode("placecell.places", {"places": places}))
-
-    def _answer_transitions(self, query: zenoh.Query) -> None:
-        api.parse(api.NoParameters, queries.payload(query), "map/transitions")
-        out = []
-        for t in self.mapper.transitions():
-            m = t.T_from_to.mean
-            out.append({"from": t.from_id, "to": t.to_id, "x": m.x, "y": m.y, "yaw": m.yaw,
-                        "covariance": t.T_from_to.covariance.tolist(), "source": t.source})
-        query.reply(query.key_expr,
-                    zenoh_link.encode("placecell.transitions", {"transitions": out}))
 
     def publish(self, leaf: str, payload: bytes) -> None:
         pub = self._publishers.get(leaf)

@@ -247,8 +247,8 @@ def _traced_first(pose: tuple[float, float, float], path_m: float, belief: Any,
                   localiser: Localiser) -> dict[str, Any]:
     """One first-pass frame: the true pose, what the acquisition made of it, and where
     the Localiser puts the robot."""
-    acq = localiser.acquisition
-    assert acq is not None
+    assert localiser.watch is not None
+    acq = localiser.watch.acquisition
 
     def r(v: float | None) -> float | None:
         return None if v is None else round(v, 4)
