@@ -300,12 +300,21 @@ class SimRobot:
             self._move = None
             self._vel = (0.0, 0.0, 0.0)
 
-    def kidnap(self, x: float, y: float, yaw: float) -> None:
-        """Teleport the robot; odometry does not notice (docs/design.md §9)."""
+    def kidnap(self, x: float, y: float, yaw: float, waypoint: int | None = None) -> None:
+        """Teleport the robot; odometry does not notice (docs/design.md §9). ``waypoint``:
+        the scenario's autopilot goes on towards that waypoint from here (an evaluator
+        carrying the robot along its tour)."""
         with self._lock:
             self._pose = (x, y, float(wrap_angle(yaw)))
             self._move = None
             self._current = (0.0, 0.0, 0.0)
+            if waypoint is not None:
+                self._waypoint = waypoint
+
+    @property
+    def waypoint(self) -> int:
+        """The scenario autopilot's next waypoint (truth interface)."""
+        return self._waypoint
 
     def autopilot_done(self) -> bool:
         """The scenario's autopilot has passed its last waypoint (truth interface)."""

@@ -44,6 +44,9 @@ EXPERIMENTS: dict[str, tuple[str, str, str]] = {
                 "by their features, against the lower levels alone (design §5)"),
     "mapping": ("tools.eval.mapping", "open-room", "places learned on the robot's own along "
                 "a tour, and how well they cover it (design §6)"),
+    "endurance": ("tools.eval.endurance", "office", "the daemon left to its job in mapping "
+                  "mode: laps of a tour with kidnaps, restarts and operator learns (design "
+                  "§6)"),
 }
 
 
