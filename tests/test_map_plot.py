@@ -18,10 +18,11 @@ from daemon.mapping.embedding import embed
 from daemon.store.sqlite_store import MapStore
 from kernel.se2 import SE2, UncertainSE2
 from tests.conftest import OfficeMap
+from tests.daemon_harness import client_session, running_daemon, wait_for, write_config
 from tests.map_fixtures import synthetic_place
 from tests.test_map_file import GEOMETRY
 from tools.ctl import main
-from tools.mapplot import KIND_COLOURS, SEGMENT_COLOURS
+from tools.mapplot import KIND_COLOURS, SEGMENT_COLOURS, fit_alignment
 
 SVG = "{http://www.w3.org/2000/svg}"
 
@@ -137,3 +138,61 @@ def test_a_picture_needs_a_known_format(tmp_path: Path,
     assert main(["map", "plot", str(tmp_path / "map.db"), "--out",
                  str(tmp_path / "map.gif")]) == 2
     assert "the picture is .svg or .png" in capsys.readouterr().err
+
+
+def test_the_alignment_fit_recovers_a_known_transform_and_refuses_a_still_robot() -> None:
+    rng = np.random.default_rng(5)
+    T = SE2(3.0, -1.0, 0.7)  # T_map_world
+    world = [(float(x), float(y)) for x, y in rng.uniform(0, 5, (40, 2))]
+    pairs = []
+    for x, y in world:
+        m = T.compose(SE2(x, y, 0.0))
+        pairs.append(((m.x + rng.normal(0, 0.01), m.y + rng.normal(0, 0.01)), (x, y)))
+    fitted, rms = fit_alignment(pairs)
+    assert (fitted.x, fitted.y, fitted.yaw) == pytest.approx((3.0, -1.0, 0.7), abs=0.01)
+    assert 0.005 < rms < 0.03
+    with pytest.raises(ValueError, match="at least two"):
+        fit_alignment(pairs[:1])
+    with pytest.raises(ValueError, match="moved less"):
+        fit_alignment([((1.0, 1.0), (2.0, 2.0))] * 5)
+
+
+@pytest.mark.xdist_group("realtime")
+@pytest.mark.timeout(300)
+def test_live_over_the_simulated_worlds_plan(tmp_path: Path, office_map: OfficeMap,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """The robot tracked from b along the corridor towards c: the office's walls drawn
+    under the map, placed by the daemon's path against the simulator's true one."""
+    refs = office_map(tmp_path / "map.db")
+    b = refs["b"]
+    with MapStore.open(tmp_path / "map.db", None, readonly=True) as store:
+        b_id = next(p.id for p in store.load().places if p.label == "b")
+    scenario = tmp_path / "corridor.toml"
+    scenario.write_text("\n".join([
+        'name = "corridor"', 'world = "generate:office:1"',
+        f"start_pose = [{b.x}, {b.y}, {b.yaw}]", "[trajectory]", 'kind = "waypoints"',
+        "speed = 0.3", "start_after_s = 1.0", f"waypoints = [[{b.x + 3.0}, {b.y}]]"]) + "\n")
+    truth = tmp_path / "truth.jsonl"
+    config, port = write_config(tmp_path, {
+        "sim": {"scenario": str(scenario), "truth_out": str(truth)},
+        "localisation": {"initial_place": b_id}})
+    with running_daemon(config):
+        session = client_session(port)
+        in_map: list[bool] = []
+        session.declare_subscriber("placecell/*/pose", lambda s: in_map.append(
+            json.loads(s.payload.to_bytes())["map"] is not None))
+        try:
+            assert wait_for(lambda: any(in_map), 120), "no pose in the map frame"
+        finally:
+            session.close()
+        assert main(["--config", str(config), "map", "plot", str(tmp_path / "map.db"),
+                     "--out", str(tmp_path / "plan.svg"), "--live", "--duration", "4",
+                     "--world", "generate:office:1", "--truth", str(truth), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["poses"] >= 10 and out["plan_rms_m"] < 0.15, out
+    root = ET.parse(tmp_path / "plan.svg").getroot()
+    walls = [e for e in root.iter(f"{SVG}line") if e.get("class") == "wall"]
+    from hal.sim.world import load_world
+    assert len(walls) == sum(len(w.segments()) for w in load_world("generate:office:1").walls)
+    assert main(["map", "plot", str(tmp_path / "map.db"), "--out", str(tmp_path / "x.svg"),
+                 "--world", "generate:office:1"]) == 2  # the plan needs the path

@@ -18,6 +18,7 @@ from typing import Any
 import zenoh
 
 from daemon.service import zenoh_link
+from kernel.errors import PlacecellError
 
 DEFAULT_CONFIG = "config/placecell.toml"
 
@@ -315,9 +316,9 @@ def _live_path(args: argparse.Namespace) -> list[dict[str, float]]:
 
     def on_pose(sample: Any) -> None:
         with contextlib.suppress(ValueError, KeyError, TypeError):
-            where = zenoh_link.decode(sample.payload.to_bytes())["map"]
-            if where is not None:
-                poses.put(where)
+            body = zenoh_link.decode(sample.payload.to_bytes())
+            if body["map"] is not None:
+                poses.put({**body["map"], "stamp_ns": body["stamp_ns"]})
 
     subscriber = session.declare_subscriber(zenoh_link.key(robot, "pose"), on_pose)
     try:
@@ -337,23 +338,58 @@ def _plot(args: argparse.Namespace) -> int:
 
     with MapStore.open(args.file, None, readonly=True) as store:
         graph = store.load()
+    if args.world and not (args.live and args.truth):
+        print("placecellctl: --world needs --live and --truth (the simulator's true poses, "
+              "[sim] truth_out): the plan is placed by the robot's path", file=sys.stderr)
+        return EXIT_USAGE
     path = _live_path(args) if args.live else []
     pose = SE2(path[-1]["x"], path[-1]["y"], path[-1]["yaw"]) if path else None
     picture = mapplot.draw_map(graph, [(p["x"], p["y"]) for p in path], pose,
                                title=f"{Path(args.file).name}: "
                                      f"{_count(len(graph), 'place')}")
+    plan_rms = None
     try:
+        if args.world:
+            plan_rms = _add_plan(picture, args.world, Path(args.truth), path)
         mapplot.write(picture, Path(args.out))
-    except (OSError, ValueError) as e:
+    except (OSError, ValueError, PlacecellError) as e:
         print(f"placecellctl: {e}", file=sys.stderr)
         return 2
     note = "" if not args.live else (
         f", the robot's last {_count(len(path), 'pose')}" if path
         else f"; no pose in the map frame heard in {args.duration:g} s")
+    if plan_rms is not None:
+        note += f"; the world's walls placed to {plan_rms:.2f} m (RMS over the path)"
     _done(args, f"drew {_count(len(graph), 'place')} to {args.out}{note}",
           {"file": str(args.file), "out": str(args.out), "places": len(graph),
-           "poses": len(path)})
+           "poses": len(path), "plan_rms_m": plan_rms})
     return EXIT_OK
+
+
+def _add_plan(picture: Any, world: str, truth: Path, path: list[dict[str, float]]) -> float:
+    """The simulated world's walls under the map, placed by fitting the true poses of
+    ``truth`` (JSON lines with ``stamp_ns``, x, y) to the daemon's path at the same
+    stamps. Returns the RMS left (m); ValueError when they cannot be fitted."""
+    import numpy as np
+
+    from hal.sim.world import load_world
+    from tools import mapplot
+
+    rows = [json.loads(line) for line in truth.read_text().splitlines() if line.strip()]
+    if not rows:
+        raise ValueError(f"{truth}: no true poses (is it the [sim] truth_out file?)")
+    stamps = np.array([r["stamp_ns"] for r in rows], dtype=np.int64)
+    pairs = []
+    for p in path:
+        k = int(np.clip(np.searchsorted(stamps, p["stamp_ns"]), 1, len(stamps) - 1))
+        k = k - 1 if abs(stamps[k - 1] - p["stamp_ns"]) < abs(stamps[k] - p["stamp_ns"]) \
+            else k
+        if abs(int(stamps[k]) - p["stamp_ns"]) <= 100_000_000:  # within 0.1 s
+            pairs.append(((p["x"], p["y"]), (rows[k]["x"], rows[k]["y"])))
+    T_map_world, rms = mapplot.fit_alignment(pairs)
+    walls = [s for w in load_world(world).walls for s in w.segments()]
+    mapplot.add_plan(picture, walls, T_map_world)
+    return rms
 
 
 def _done(args: argparse.Namespace, text: str, as_json: dict[str, Any]) -> None:
@@ -689,6 +725,10 @@ def make_parser() -> argparse.ArgumentParser:
                    help="add the robot's pose and recent path from the running daemon")
     m.add_argument("--duration", type=float, default=5.0,
                    help="seconds of the robot's path to collect with --live")
+    m.add_argument("--world", help="a simulated robot's world (a file or "
+                   "generate:<kind>:<seed>): its walls drawn under the map, placed by the "
+                   "path (needs --live and --truth)")
+    m.add_argument("--truth", help="the simulator's true poses ([sim] truth_out) for --world")
     m.add_argument("--json", action="store_true")
     m = msub.add_parser("export", help="places and transitions to a folder (JSON, PNGs)")
     m.add_argument("file")

@@ -1,6 +1,8 @@
 """A picture of the map (``placecellctl map plot``): the places at their embedded
 positions with their labels, the transitions by kind, the segments, a metric grid of the
-`map` frame, and the robot's pose and recent path when the daemon is asked (design §6).
+`map` frame, and the robot's pose and recent path when the daemon is asked (design §6);
+for a simulated robot, the world's walls under it, placed by fitting the robot's true path
+to the path the daemon published (``fit_alignment``).
 
 The picture is a list of primitives in metres; SVG and PNG (OpenCV, no plotting library
 on the robot) are two renderings of the same list. The SVG carries each place's id and
@@ -27,6 +29,7 @@ KIND_COLOURS = {"odometry": (150, 150, 150), "vision": (40, 110, 220), "cycle": 
 SEGMENT_COLOURS = [(200, 60, 40), (140, 70, 170), (220, 140, 20), (20, 150, 150),
                    (120, 120, 20)]
 PATH_COLOUR = (230, 60, 140)
+WALL_COLOUR = (175, 160, 135)
 INK, GRID = (40, 40, 40), (220, 220, 220)
 SCALE_PX_PER_M = 60.0
 MARGIN_PX = 70
@@ -117,6 +120,39 @@ def draw_map(graph: TopologicalMap, path: list[tuple[float, float]] | None = Non
     return pic
 
 
+def fit_alignment(pairs: list[tuple[tuple[float, float], tuple[float, float]]]
+                  ) -> tuple[SE2, float]:
+    """T_map_world, the rotation and translation taking world points onto map points in
+    least squares (Kabsch in 2-D), from (map point, world point) pairs, and the RMS
+    distance left between them (m). ValueError for fewer than two pairs or points that do
+    not spread (a robot that stood still: no direction to fit)."""
+    if len(pairs) < 2:
+        raise ValueError(f"{len(pairs)} poses matched: at least two are needed")
+    m = np.array([p[0] for p in pairs], dtype=float)
+    w = np.array([p[1] for p in pairs], dtype=float)
+    mc, wc = m - m.mean(axis=0), w - w.mean(axis=0)
+    if float(np.sqrt((wc ** 2).sum(axis=1)).max()) < 0.2:
+        raise ValueError("the robot moved less than 0.2 m: no direction to fit the plan by")
+    h = wc.T @ mc
+    yaw = math.atan2(h[0, 1] - h[1, 0], h[0, 0] + h[1, 1])
+    c, s = math.cos(yaw), math.sin(yaw)
+    rot = np.array([[c, -s], [s, c]])
+    t = m.mean(axis=0) - rot @ w.mean(axis=0)
+    rms = float(np.sqrt((((w @ rot.T) + t - m) ** 2).sum(axis=1).mean()))
+    return SE2(float(t[0]), float(t[1]), yaw), rms
+
+
+def add_plan(pic: Picture, walls: list[tuple[tuple[float, float], tuple[float, float]]],
+             T_map_world: SE2) -> None:
+    """The world's wall segments, in the map frame, under everything else."""
+    items = []
+    for a, b in walls:
+        pa, pb = T_map_world.compose(SE2(a[0], a[1], 0.0)), T_map_world.compose(
+            SE2(b[0], b[1], 0.0))
+        items.append(Item("line", ((pa.x, pa.y), (pb.x, pb.y)), WALL_COLOUR, cls="wall"))
+    pic.items[:0] = items
+
+
 def _tick(span_m: float) -> float:
     for step in (0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0):
         if span_m / step <= 12:
@@ -159,6 +195,8 @@ def _legend(pic: Picture) -> list[tuple[str, tuple[int, int, int], str]]:
     out += [("line", KIND_COLOURS[k], f"transition: {k}") for k in kinds]
     if any(it.cls in ("path", "robot") for it in pic.items):
         out.append(("line", PATH_COLOUR, "robot: pose and recent path"))
+    if any(it.cls == "wall" for it in pic.items):
+        out.append(("line", WALL_COLOUR, "simulated world's walls (fitted to the true path)"))
     return out
 
 
