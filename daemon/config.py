@@ -69,14 +69,25 @@ class Ros2Settings:
     domain_id: int = setting(0, ge=0, le=232, doc="ROS_DOMAIN_ID of the ROS 2 system")
     topic: str = setting("/placecell/pose", doc="the PoseWithCovarianceStamped topic")
     frame_id: str = setting("map", doc="header.frame_id of the published pose")
+    tf: bool = setting(True, doc="publish map -> odom on /tf while tracking, as nav2's "
+                       "AMCL does (tf2_msgs/msg/TFMessage)")
+    odom_frame: str = setting("odom", doc="the odometry frame (child of map on /tf)")
+    base_frame: str = setting("base_link", doc="the robot's frame (child of odom)")
+    odom_tf: bool = setting(False, doc="also publish odom -> base_link from the base's "
+                            "odometry: for a base no ROS driver publishes (the XR4000)")
+    transform_tolerance_s: float = setting(1.0, ge=0.0, le=10.0, doc="map -> odom is "
+                                           "post-dated by this (AMCL's transform_tolerance)")
+    tf_period_s: float = setting(0.1, gt=0.0, le=10.0, doc="map -> odom re-sent this often "
+                                 "while tracking (between frames)")
 
     def __post_init__(self) -> None:
         if not _TOPIC.match(self.topic):
             raise ValueError(f"ros2.topic {self.topic!r} is not a ROS 2 topic name "
                              "(e.g. /placecell/pose: letters, digits, '_' between slashes)")
-        if not _FRAME_ID.match(self.frame_id):
-            raise ValueError(f"ros2.frame_id {self.frame_id!r} is not a frame name "
-                             "(letters, digits, '_' or '/', at most 64)")
+        for name in ("frame_id", "odom_frame", "base_frame"):
+            if not _FRAME_ID.match(getattr(self, name)):
+                raise ValueError(f"ros2.{name} {getattr(self, name)!r} is not a frame name "
+                                 "(letters, digits, '_' or '/', at most 64)")
 
 
 @dataclass(frozen=True)

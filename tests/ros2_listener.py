@@ -33,6 +33,17 @@ def _decode(payload: bytes) -> dict[str, Any]:
             "orientation": [q.x, q.y, q.z, q.w], "covariance": msg.pose.covariance.tolist()}
 
 
+def _decode_tf(payload: bytes) -> list[dict[str, Any]]:
+    msg = TYPESTORE.deserialize_cdr(payload, "tf2_msgs/msg/TFMessage")
+    return [{"sec": t.header.stamp.sec, "nanosec": t.header.stamp.nanosec,
+             "parent": t.header.frame_id, "child": t.child_frame_id,
+             "translation": [t.transform.translation.x, t.transform.translation.y,
+                             t.transform.translation.z],
+             "rotation": [t.transform.rotation.x, t.transform.rotation.y,
+                          t.transform.rotation.z, t.transform.rotation.w]}
+            for t in msg.transforms]
+
+
 def main(argv: list[str]) -> int:
     port, robot, out_path, seconds = int(argv[0]), argv[1], argv[2], float(argv[3])
     lock = threading.Lock()
@@ -49,6 +60,12 @@ def main(argv: list[str]) -> int:
         write({"kind": "ros", "key": str(sample.key_expr), "attachment": attachment.hex(),
                "payload_len": len(payload), "payload": payload.hex(),
                "message": _decode(payload), "received_ns": time.time_ns()})
+
+    def on_tf(sample: zenoh.Sample) -> None:
+        attachment = sample.attachment.to_bytes() if sample.attachment is not None else b""
+        write({"kind": "tf", "key": str(sample.key_expr), "attachment": attachment.hex(),
+               "transforms": _decode_tf(sample.payload.to_bytes()),
+               "received_ns": time.time_ns()})
 
     def on_token(sample: zenoh.Sample) -> None:
         write({"kind": "token", "key": str(sample.key_expr),
@@ -69,6 +86,7 @@ def main(argv: list[str]) -> int:
         first_pose.wait(seconds)
         subscribers += [
             session.declare_subscriber("0/placecell/pose/*/*", on_ros),
+            session.declare_subscriber("0/tf/*/*", on_tf),
             session.liveliness().declare_subscriber("@ros2_lv/0/**", on_token, history=True),
         ]
         time.sleep(max(0.0, seconds - (time.monotonic() - started)))

@@ -91,7 +91,8 @@ def test_a_ros2_subscriber_receives_the_tracked_pose(tmp_path: Path,
     office_map(tmp_path / "map.db")
     config, port = write_config(tmp_path, {
         "robot": {"name": "rosbot"}, "mapping": {"mode": "localisation"},
-        "sim": {"start_pose": [4.75, 10.15, 0.4]}, "ros2": {"enabled": True}})
+        "sim": {"start_pose": [4.75, 10.15, 0.4]},
+        "ros2": {"enabled": True, "odom_tf": True}})
     out = tmp_path / "heard.jsonl"
     with running_daemon(config):
         listener = subprocess.Popen(
@@ -153,3 +154,39 @@ def test_a_ros2_subscriber_receives_the_tracked_pose(tmp_path: Path,
                                                       rel=1e-4)
         assert cov[5, 5] == pytest.approx(place_cov[2, 2], rel=1e-4)
         assert cov[2, 2] == cov[3, 3] == cov[4, 4] == 0.0
+    _check_tf(records, tokens, samples)
+
+
+def _transform(t: dict) -> SE2:
+    return SE2(t["translation"][0], t["translation"][1], _yaw(t["rotation"]))
+
+
+def _check_tf(records: list[dict], tokens: list[str], samples: list[dict]) -> None:
+    """map -> odom and odom -> base_link on /tf (nav2's AMCL publishes the first; a base
+    no ROS driver publishes needs the second): the key and token with rosbags' hash,
+    map -> odom post-dated by the transform tolerance, and the two composed give the
+    pose the daemon published."""
+    tf = [r for r in records if r["kind"] == "tf"]
+    assert len(tf) >= 10, records[-5:]
+    tf_hash = JAZZY.hash_rihs01("tf2_msgs/msg/TFMessage")
+    assert {r["key"] for r in tf} == {f"0/tf/tf2_msgs::msg::dds_::TFMessage_/{tf_hash}"}
+    assert [t for t in tokens if "/MP/%/%/placecell/%tf/tf2_msgs::msg::dds_::TFMessage_/"
+            f"{tf_hash}/::,100:,:,:,," in t], tokens
+    poses = [(s["message"]["position"], _yaw(s["message"]["orientation"])) for s in samples]
+    paired, aheads = 0, []
+    for r in tf:
+        by_child = {t["child"]: t for t in r["transforms"]}
+        map_odom = by_child["odom"]
+        assert map_odom["parent"] == "map" and map_odom["translation"][2] == 0.0
+        ahead_s = (map_odom["sec"] * 1e9 + map_odom["nanosec"] - r["received_ns"]) / 1e9
+        assert -1.0 < ahead_s <= 1.0, ahead_s  # post-dated by 1 s, sent within a second
+        aheads.append(ahead_s)
+        if "base_link" in by_child:
+            assert by_child["base_link"]["parent"] == "odom"
+            base = _transform(map_odom).compose(_transform(by_child["base_link"]))
+            assert any(abs(base.x - p[0]) < 1e-4 and abs(base.y - p[1]) < 1e-4
+                       and abs(math.remainder(base.yaw - yaw, math.tau)) < 1e-4
+                       for p, yaw in poses), (base, poses[-3:])
+            paired += 1
+    assert paired >= 5, paired
+    assert max(aheads) > 0.5, aheads  # the transform tolerance: stamps ahead of now

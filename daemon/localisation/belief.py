@@ -8,6 +8,7 @@ from typing import Literal
 from daemon.mapping.acquisition import AcquisitionDecision
 from daemon.mapping.transition import Transition
 from daemon.vision.floor import FloorModel
+from kernel.types import Odometry
 
 BeliefState = Literal["uninitialised", "tracking", "lost", "relocalising"]
 
@@ -70,3 +71,4 @@ class Belief:
     event: LocalisationEvent | None = None  # a loss or a relocalisation in this frame
     disambiguation: Disambiguation | None = None  # look-alikes told apart in this frame
     floor_learned: FloorModel | None = None  # the floor learned from this frame (design §4)
+    odometry: Odometry | None = None  # the base's odometry at the frame's stamp

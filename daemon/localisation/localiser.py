@@ -363,7 +363,7 @@ class Localiser:
             switched_from = self._move_to(revisited.place_id, grey, odo)
         timings["acquisition"] = (time.perf_counter() - t3) * 1e3
         timings["total"] = (time.perf_counter() - t0) * 1e3
-        return self._belief(frame.stamp_ns, odo is not None, motion, local, scores,
+        return self._belief(frame.stamp_ns, odo, motion, local, scores,
                             switched_from, closed, recent, recent_lrp, decision, background,
                             {k: round(v, 3) for k, v in timings.items()}, event)
 
@@ -732,14 +732,16 @@ class Localiser:
             self._closure = None
         return closed
 
-    def _belief(self, stamp_ns: int, odometry_ok: bool,
+    def _belief(self, stamp_ns: int, odometry: Odometry | None,
                 motion: tuple[float, float, float] | None, local: LocalResult | None,
                 scores: tuple[PlaceScore, ...], switched_from: int | None,
                 closed: Transition | None, recent: int | None, recent_lrp: float | None,
                 decision: AcquisitionDecision | None,
                 background: tuple[tuple[int, float], ...], timings: dict[str, float],
                 event: LocalisationEvent | None) -> Belief:
-        common = dict(stamp_ns=stamp_ns, odometry_ok=odometry_ok, motion_since_last=motion,
+        odometry_ok = odometry is not None
+        common = dict(stamp_ns=stamp_ns, odometry_ok=odometry_ok, odometry=odometry,
+                      motion_since_last=motion,
                       scores=scores, timings_ms=timings, recent_place=recent,
                       recent_place_lrp=recent_lrp, acquisition=decision,
                       backgrounds=background, switched_from=switched_from,

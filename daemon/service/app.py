@@ -72,6 +72,7 @@ class Daemon:
         self._session: zenoh.Session | None = None
         self._publishers: dict[str, Any] = {}
         self._ros2: Ros2PosePublisher | None = None
+        self._map_odom: SE2 | None = None  # the last map -> odom published (ROS 2)
         self._access: access.AccessWatch | None = None
         self._link_listener: Any = None
         self._view: FoxgloveView | None = None
@@ -510,10 +511,31 @@ class Daemon:
         R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         covariance = R @ np.array(belief.covariance).reshape(3, 3) @ R.T
         epoch_ns = belief.stamp_ns + time.time_ns() - time.monotonic_ns()
+        settings = self.config.ros2
         try:
             self._ros2.publish(in_map, covariance, epoch_ns)
+            odo = belief.odometry
+            if odo is not None:  # map -> odom = map -> base ∘ (odom -> base)⁻¹, as AMCL
+                odom_base = SE2(odo.x, odo.y, odo.yaw)
+                self._map_odom = in_map.compose(odom_base.inverse())
+                self._ros2.publish_tf(
+                    self._map_odom, epoch_ns + int(settings.transform_tolerance_s * 1e9),
+                    odom_base if settings.odom_tf else None, epoch_ns)
         except Exception as e:  # noqa: BLE001 - zenoh shutting down
             log.debug("publish ROS 2 pose failed: %s", e)
+
+    def _resend_map_odom(self) -> None:
+        """map -> odom again, post-dated from now, while tracking (between frames: a
+        slow frame must not let nav2's transform go stale)."""
+        belief = self._belief
+        if self._ros2 is None or self._map_odom is None or belief is None \
+                or belief.state != "tracking":
+            return
+        try:
+            self._ros2.publish_tf(self._map_odom, time.time_ns() + int(
+                self.config.ros2.transform_tolerance_s * 1e9))
+        except Exception as e:  # noqa: BLE001 - zenoh shutting down
+            log.debug("publish map -> odom failed: %s", e)
 
     def publish_event(self, kind: str, **fields: Any) -> None:
         body = {"event": kind, "stamp_ns": time.monotonic_ns(), **fields}
@@ -647,10 +669,12 @@ class Daemon:
         ready = False
         period = self.config.service.status_period_s
         watchdog_s = self.notifier.watchdog_interval_s
-        tick = min(0.1, period, watchdog_s / 2 if watchdog_s else 0.1)
+        tick = min(0.1, period, self.config.ros2.tf_period_s,
+                   watchdog_s / 2 if watchdog_s else 0.1)
         next_status = time.monotonic()
         next_watchdog = time.monotonic()
         next_save = time.monotonic() + self.config.map.save_pose_period_s
+        next_tf = time.monotonic()
         startup_deadline = time.monotonic() + 30.0
         while not self._stop.is_set():
             now = time.monotonic()
@@ -664,6 +688,9 @@ class Daemon:
             if now >= next_status:
                 self.publish("status", self.status_payload())
                 next_status = now + period
+            if now >= next_tf:
+                self._resend_map_odom()
+                next_tf = now + self.config.ros2.tf_period_s
             if now >= next_save:
                 self._save_pose()
                 next_save = now + self.config.map.save_pose_period_s

@@ -19,6 +19,13 @@ What rmw_zenoh expects, and what this module makes:
 
 The pose is in the ``map`` frame (design §6); the 6x6 covariance is the 3x3 of (x, y, yaw)
 placed at rows/columns (0, 1, 5), the others 0 as nav2's AMCL publishes them.
+
+With ``[ros2] tf`` the node also publishes ``tf2_msgs/msg/TFMessage`` on ``/tf`` as nav2's
+AMCL does (``amcl_node.cpp``): ``map -> odom`` = (map -> base) ∘ (odom -> base)⁻¹ from the
+pose and the base's odometry at the frame's stamp, post-dated by
+``transform_tolerance_s`` and re-sent every ``tf_period_s`` while tracking, nothing
+before the first tracked pose; and with ``odom_tf`` the odometry itself as ``odom ->
+base_link`` (for a base no ROS driver publishes).
 """
 
 from __future__ import annotations
@@ -37,6 +44,8 @@ from daemon.config import Ros2Settings
 from kernel.se2 import SE2
 
 MSG_TYPE = "geometry_msgs/msg/PoseWithCovarianceStamped"
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+TF_TOPIC = "/tf"
 # rmw_zenoh's name for it: <package>::msg::dds_::<Type>_
 MANGLED_TYPE = "geometry_msgs::msg::dds_::PoseWithCovarianceStamped_"
 # REP-2011 type hash (RIHS01) of the message definition; Humble and Jazzy alike.
@@ -45,6 +54,7 @@ NODE_NAME = "placecell"
 # QoS as rmw_zenoh writes it in a token, fields equal to its defaults left empty:
 # reliable, volatile, keep-last 10 (rclcpp's default depth; rmw_zenoh's own is 42).
 QOS_KEYEXPR = "::,10:,:,:,,"
+TF_QOS_KEYEXPR = "::,100:,:,:,,"  # tf2's publisher depth
 GID_LENGTH = 16
 
 _TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
@@ -56,8 +66,19 @@ def mangle(name: str) -> str:
     return name.replace("/", "%") if name else "%"
 
 
-def topic_key(domain_id: int, topic: str) -> str:
-    return f"{domain_id}/{topic.strip('/')}/{MANGLED_TYPE}/{TYPE_HASH}"
+def mangled_type(msg_type: str) -> str:
+    """rmw_zenoh's name of a message type: <package>::msg::dds_::<Type>_."""
+    package, kind, name = msg_type.split("/")
+    return f"{package}::{kind}::dds_::{name}_"
+
+
+def type_hash(msg_type: str) -> str:
+    """The REP-2011 type hash (RIHS01) of a message definition, as rosbags computes it."""
+    return TYPE_HASH if msg_type == MSG_TYPE else str(_TYPESTORE.hash_rihs01(msg_type))
+
+
+def topic_key(domain_id: int, topic: str, msg_type: str = MSG_TYPE) -> str:
+    return f"{domain_id}/{topic.strip('/')}/{mangled_type(msg_type)}/{type_hash(msg_type)}"
 
 
 def node_token(domain_id: int, zid: str, node_id: int) -> str:
@@ -66,11 +87,11 @@ def node_token(domain_id: int, zid: str, node_id: int) -> str:
 
 
 def publisher_token(domain_id: int, zid: str, node_id: int, entity_id: int,
-                    topic: str) -> str:
+                    topic: str, msg_type: str = MSG_TYPE, qos: str = QOS_KEYEXPR) -> str:
     topic = topic if topic.startswith("/") else "/" + topic
     return (f"@ros2_lv/{domain_id}/{zid}/{node_id}/{entity_id}/MP/{mangle('/')}/"
-            f"{mangle('/')}/{NODE_NAME}/{mangle(topic)}/{MANGLED_TYPE}/{TYPE_HASH}/"
-            f"{QOS_KEYEXPR}")
+            f"{mangle('/')}/{NODE_NAME}/{mangle(topic)}/{mangled_type(msg_type)}/"
+            f"{type_hash(msg_type)}/{qos}")
 
 
 def gid(token: str) -> bytes:
@@ -108,30 +129,85 @@ def pose_cdr(pose: SE2, covariance: np.ndarray, stamp_ns: int, frame_id: str) ->
     return bytes(_TYPESTORE.serialize_cdr(msg, MSG_TYPE))
 
 
+def _time(stamp_ns: int) -> Any:
+    return _TYPESTORE.types["builtin_interfaces/msg/Time"](sec=stamp_ns // 1_000_000_000,
+                                                          nanosec=stamp_ns % 1_000_000_000)
+
+
+def tf_cdr(transforms: list[tuple[str, str, SE2, int]]) -> bytes:
+    """TFMessage in CDR: one TransformStamped per (parent, child, T_parent_child, stamp
+    since the UNIX epoch in ns), in the plane (z 0, yaw about z)."""
+    t = _TYPESTORE.types
+    stamped = [t["geometry_msgs/msg/TransformStamped"](
+        header=t["std_msgs/msg/Header"](stamp=_time(stamp_ns), frame_id=parent),
+        child_frame_id=child,
+        transform=t["geometry_msgs/msg/Transform"](
+            translation=t["geometry_msgs/msg/Vector3"](x=T.x, y=T.y, z=0.0),
+            rotation=t["geometry_msgs/msg/Quaternion"](
+                x=0.0, y=0.0, z=math.sin(T.yaw / 2.0), w=math.cos(T.yaw / 2.0))))
+        for parent, child, T, stamp_ns in transforms]
+    return bytes(_TYPESTORE.serialize_cdr(t[TF_TYPE](transforms=stamped), TF_TYPE))
+
+
+class _Publisher:
+    """One rmw_zenoh publisher: its key, liveliness token, GID and sequence."""
+
+    def __init__(self, session: zenoh.Session, domain_id: int, zid: str, node_id: int,
+                 entity_id: int, topic: str, msg_type: str, qos: str) -> None:
+        self.key = topic_key(domain_id, topic, msg_type)
+        self.token_key = publisher_token(domain_id, zid, node_id, entity_id, topic, msg_type,
+                                         qos)
+        self.gid = gid(self.token_key)
+        self._sequence = 0
+        self._publisher = session.declare_publisher(self.key)
+        self._token = session.liveliness().declare_token(self.token_key)
+
+    def put(self, payload: bytes) -> None:
+        self._sequence += 1
+        self._publisher.put(payload,
+                            attachment=attachment(self._sequence, time.time_ns(), self.gid))
+
+    def close(self) -> None:
+        self._token.undeclare()
+        self._publisher.undeclare()
+
+
 class Ros2PosePublisher:
-    """One ROS 2 node with one publisher on the daemon's zenoh session."""
+    """One ROS 2 node on the daemon's zenoh session: the pose publisher and, with
+    ``[ros2] tf``, a publisher on /tf (map -> odom, and odom -> base_link with
+    ``odom_tf``)."""
 
     def __init__(self, session: zenoh.Session, settings: Ros2Settings) -> None:
         self.settings = settings
         zid = str(session.zid())
-        node_id, entity_id = 0, 1  # the first entities of the session's ROS context
-        self.key = topic_key(settings.domain_id, settings.topic)
+        node_id = 0  # the first entities of the session's ROS context
         self.node_token_key = node_token(settings.domain_id, zid, node_id)
-        self.publisher_token_key = publisher_token(settings.domain_id, zid, node_id,
-                                                   entity_id, settings.topic)
-        self.gid = gid(self.publisher_token_key)
-        self._sequence = 0
-        self._tokens: list[Any] = [session.liveliness().declare_token(self.node_token_key)]
-        self._publisher = session.declare_publisher(self.key)
-        self._tokens.append(session.liveliness().declare_token(self.publisher_token_key))
+        self._node_token = session.liveliness().declare_token(self.node_token_key)
+        self._pose = _Publisher(session, settings.domain_id, zid, node_id, 1, settings.topic,
+                                MSG_TYPE, QOS_KEYEXPR)
+        self.key, self.publisher_token_key = self._pose.key, self._pose.token_key
+        self.gid = self._pose.gid
+        self._tf = _Publisher(session, settings.domain_id, zid, node_id, 2, TF_TOPIC,
+                              TF_TYPE, TF_QOS_KEYEXPR) if settings.tf else None
 
     def publish(self, pose: SE2, covariance: np.ndarray, stamp_ns: int) -> None:
         """``stamp_ns``: the frame's time since the UNIX epoch (ROS time)."""
-        self._sequence += 1
-        self._publisher.put(pose_cdr(pose, covariance, stamp_ns, self.settings.frame_id),
-                            attachment=attachment(self._sequence, time.time_ns(), self.gid))
+        self._pose.put(pose_cdr(pose, covariance, stamp_ns, self.settings.frame_id))
+
+    def publish_tf(self, map_odom: SE2, stamp_ns: int, odom_base: SE2 | None = None,
+                   odom_stamp_ns: int = 0) -> None:
+        """map -> odom stamped ``stamp_ns`` (post-dated by the caller), and odom -> base
+        at ``odom_stamp_ns`` when given (ROS time, ns since the UNIX epoch)."""
+        if self._tf is None:
+            return
+        s = self.settings
+        transforms = [(s.frame_id, s.odom_frame, map_odom, stamp_ns)]
+        if odom_base is not None:
+            transforms.append((s.odom_frame, s.base_frame, odom_base, odom_stamp_ns))
+        self._tf.put(tf_cdr(transforms))
 
     def close(self) -> None:
-        for token in self._tokens:
-            token.undeclare()
-        self._publisher.undeclare()
+        self._node_token.undeclare()
+        self._pose.close()
+        if self._tf is not None:
+            self._tf.close()
