@@ -37,7 +37,7 @@ def _scenario(tmp: Path) -> Path:
     path.write_text("\n".join([
         'name = "drive-on"', 'world = "generate:office:1"', "start_pose = [3.0, 10.0, 0.0]",
         "[trajectory]", 'kind = "waypoints"', "speed = 0.3", "start_after_s = 100000.0",
-        "resume_after_s = 1.0", "waypoints = [[7.5, 10.0]]", "[drift]",
+        "resume_after_s = 3.0", "waypoints = [[7.5, 10.0]]", "[drift]",
         *(f"{k} = {v!r}" for k, v in NO_DRIFT.items())]) + "\n")
     return path
 
