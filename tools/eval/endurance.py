@@ -89,13 +89,10 @@ class Tally:
     events: list[dict[str, Any]] = field(default_factory=list)
 
 
-def _world(args: argparse.Namespace) -> str:
-    return args.world or f"generate:{args.world_kind}:{args.world_seed}"
-
-
 def _scenario(args: argparse.Namespace, laps: int) -> Scenario:
     scenario = scenario_from_dict({
-        "name": "endurance-tour", "world": _world(args), "frame_rate_hz": args.frame_rate,
+        "name": "endurance-tour", "world": mapping.world_spec(args),
+        "frame_rate_hz": args.frame_rate,
         "trajectory": {"kind": "tour", "speed": args.speed, "laps": 1,
                        "resume_after_s": 1.0}})
     lap = scenario.waypoints[:args.waypoints] if args.waypoints else scenario.waypoints
@@ -269,7 +266,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                                        [refs[p.id] for p in places if p.id in refs],
                                        coverage_args)
     return {
-        "world": {"spec": _world(args)},
+        "world": {"spec": mapping.world_spec(args)},
         "config": {"laps": args.laps, "speed_m_s": args.speed, "frame_rate_hz": args.frame_rate,
                    "waypoints": args.waypoints, "restarts": args.restarts,
                    "mapped_kidnaps": args.mapped_kidnaps,

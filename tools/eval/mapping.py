@@ -78,13 +78,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "nearest place's LRP and background")
 
 
-def _world(args: argparse.Namespace) -> str:
+def world_spec(args: argparse.Namespace) -> str:
+    """The world of the experiment: --world, else generated from --world-kind and
+    --world-seed."""
     return args.world or f"generate:{args.world_kind}:{args.world_seed}"
 
 
 def _scenario(args: argparse.Namespace) -> Scenario:
     return scenario_from_dict({
-        "name": "mapping-tour", "world": _world(args), "frame_rate_hz": args.frame_rate,
+        "name": "mapping-tour", "world": world_spec(args), "frame_rate_hz": args.frame_rate,
         "trajectory": {"kind": "tour", "speed": args.speed, "laps": args.laps,
                        "resume_after_s": 1.0}})
 
@@ -107,7 +109,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             cfg.mapping, acquisition=dataclasses.replace(
                 cfg.mapping.acquisition, coverage_margin=args.coverage_margin)))
     scenario = _scenario(args)
-    key = json.dumps({"world": _world(args), "speed": args.speed, "laps": args.laps,
+    key = json.dumps({"world": world_spec(args), "speed": args.speed, "laps": args.laps,
                       "frame_rate": args.frame_rate, "seed": args.seed,
                       "acquisition": dataclasses.asdict(cfg.mapping.acquisition)})
     with tempfile.TemporaryDirectory() as tmp, \
@@ -130,7 +132,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     spacing = min((math.dist(a[:2], b[:2]) for i, a in enumerate(refs) for b in refs[i + 1:]),
                   default=float("nan"))
     return {
-        "world": {"spec": _world(args)},
+        "world": {"spec": world_spec(args)},
         "config": {"speed_m_s": args.speed, "frame_rate_hz": args.frame_rate,
                    "laps": args.laps, "margin": args.margin, "near_m": args.near,
                    "acquisition": dataclasses.asdict(cfg.mapping.acquisition) | {
