@@ -69,6 +69,8 @@ class Ros2Settings:
     domain_id: int = setting(0, ge=0, le=232, doc="ROS_DOMAIN_ID of the ROS 2 system")
     topic: str = setting("/placecell/pose", doc="the PoseWithCovarianceStamped topic")
     frame_id: str = setting("map", doc="header.frame_id of the published pose")
+    initial_pose_topic: str = setting("/initialpose", doc="a PoseWithCovarianceStamped in the "
+                                      "map frame here sets the pose (rviz's 2D Pose Estimate)")
     tf: bool = setting(True, doc="publish map -> odom on /tf while tracking, as nav2's "
                        "AMCL does (tf2_msgs/msg/TFMessage)")
     odom_frame: str = setting("odom", doc="the odometry frame (child of map on /tf)")
@@ -81,9 +83,11 @@ class Ros2Settings:
                                  "while tracking (between frames)")
 
     def __post_init__(self) -> None:
-        if not _TOPIC.match(self.topic):
-            raise ValueError(f"ros2.topic {self.topic!r} is not a ROS 2 topic name "
-                             "(e.g. /placecell/pose: letters, digits, '_' between slashes)")
+        for name in ("topic", "initial_pose_topic"):
+            if not _TOPIC.match(getattr(self, name)):
+                raise ValueError(f"ros2.{name} {getattr(self, name)!r} is not a ROS 2 topic "
+                                 "name (e.g. /placecell/pose: letters, digits, '_' between "
+                                 "slashes)")
         for name in ("frame_id", "odom_frame", "base_frame"):
             if not _FRAME_ID.match(getattr(self, name)):
                 raise ValueError(f"ros2.{name} {getattr(self, name)!r} is not a frame name "

@@ -4,6 +4,7 @@ computation) and, end to end, from a subscriber in its own process."""
 
 from __future__ import annotations
 
+import json
 import math
 import struct
 import subprocess
@@ -20,7 +21,14 @@ from daemon.service import ros2
 from kernel.errors import ConfigError
 from kernel.se2 import SE2
 from tests.conftest import OfficeMap
-from tests.daemon_harness import REPO, read_json_lines, running_daemon, wait_for, write_config
+from tests.daemon_harness import (
+    REPO,
+    client_session,
+    read_json_lines,
+    running_daemon,
+    wait_for,
+    write_config,
+)
 
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
 POSE_TYPE = "geometry_msgs/msg/PoseWithCovarianceStamped"
@@ -190,3 +198,60 @@ def _check_tf(records: list[dict], tokens: list[str], samples: list[dict]) -> No
             paired += 1
     assert paired >= 5, paired
     assert max(aheads) > 0.5, aheads  # the transform tolerance: stamps ahead of now
+
+
+@pytest.mark.timeout(240)
+def test_an_initial_pose_from_ros2_moves_the_pose_there(tmp_path: Path,
+                                                      office_map: OfficeMap) -> None:
+    """rviz's 2D Pose Estimate: a PoseWithCovarianceStamped in `map` on /initialpose,
+    serialised by rosbags and put on a plain zenoh session, sets the pose (event
+    ``pose_set``) and the next pose is there; one in another frame is ignored."""
+    office_map(tmp_path / "map.db")
+    config, port = write_config(tmp_path, {
+        "robot": {"name": "rosbot"}, "mapping": {"mode": "localisation"},
+        "sim": {"start_pose": [4.75, 10.15, 0.4]}, "ros2": {"enabled": True}})
+    t = JAZZY.types
+    poses: list[dict] = []
+    events: list[dict] = []
+
+    def initial(x: float, y: float, yaw: float, frame: str) -> bytes:
+        cov = np.zeros(36)
+        cov[0] = cov[7] = 0.02 ** 2
+        cov[35] = 0.02 ** 2
+        msg = t[POSE_TYPE](
+            header=t["std_msgs/msg/Header"](
+                stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id=frame),
+            pose=t["geometry_msgs/msg/PoseWithCovariance"](
+                pose=t["geometry_msgs/msg/Pose"](
+                    position=t["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+                    orientation=t["geometry_msgs/msg/Quaternion"](
+                        x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))),
+                covariance=cov))
+        return bytes(JAZZY.serialize_cdr(msg, POSE_TYPE))
+
+    key = (f"0/initialpose/geometry_msgs::msg::dds_::PoseWithCovarianceStamped_/"
+           f"{JAZZY.hash_rihs01(POSE_TYPE)}")
+    with running_daemon(config):
+        session = client_session(port)
+        try:
+            session.declare_subscriber("placecell/rosbot/pose", lambda s: poses.append(
+                json.loads(s.payload.to_bytes())))
+            session.declare_subscriber("placecell/rosbot/events", lambda s: events.append(
+                json.loads(s.payload.to_bytes())))
+            assert wait_for(lambda: any(p["state"] == "tracking" and p["map"] for p in poses),
+                            120), poses[-1:]
+            now = next(p["map"] for p in reversed(poses) if p["map"])
+            target = (now["x"] + 0.3, now["y"] - 0.1, now["yaw"] + 0.2)
+            publisher = session.declare_publisher(key)
+            publisher.put(initial(*target, "odom"))  # another frame: ignored
+            publisher.put(initial(*target, "map"))
+            assert wait_for(lambda: any(e["event"] == "pose_set" for e in events), 30), events
+            n = len(poses)
+            assert wait_for(lambda: any(p["map"] for p in poses[n:]), 30)
+            after = next(p["map"] for p in poses[n:] if p["map"])
+        finally:
+            session.close()
+    set_events = [e for e in events if e["event"] == "pose_set"]
+    assert len(set_events) == 1 and set_events[0]["source"] == "/initialpose", set_events
+    assert math.hypot(after["x"] - target[0], after["y"] - target[1]) < 0.15, (after, target)
+    assert abs(math.remainder(after["yaw"] - target[2], math.tau)) < 0.15, (after, target)

@@ -202,6 +202,7 @@ class Daemon:
             s, zenoh_link.key(self.robot, "events"))
         if self.config.ros2.enabled:  # the pose for ROS 2 nodes (design §11)
             self._ros2 = Ros2PosePublisher(s, self.config.ros2)
+            self._ros2.on_initial_pose(self._initial_pose)
             log.info("ROS 2: publishing %s on %s", self.config.ros2.topic, self._ros2.key)
         # Late joiners (placecellctl status) get the latest status at once by query.
         answers = (("status", self._answer_status),
@@ -429,6 +430,33 @@ class Daemon:
                  request.yaw)
         query.reply(query.key_expr, api.result(place=request.place, x=request.x, y=request.y,
                                                yaw=request.yaw))
+
+    def _initial_pose(self, pose: SE2, covariance: np.ndarray, frame_id: str) -> None:
+        """A pose in the map frame from ROS 2 (/initialpose, rviz's 2D Pose Estimate):
+        tracked from there, in the place the map puts nearest it (design §11)."""
+        settings = self.config.ros2
+        localiser = self.processing.localiser
+        if frame_id != settings.frame_id:
+            log.warning("%s in frame %r ignored: poses are set in %r", settings.
+                        initial_pose_topic, frame_id, settings.frame_id)
+            return
+        frame = self.mapper.map_frame
+        if localiser is None or not frame:
+            log.warning("%s ignored: %s", settings.initial_pose_topic,
+                        "the localiser is not running" if localiser is None
+                        else "no place is in the map frame yet")
+            return
+        place = min(frame, key=lambda p: math.hypot(frame[p].x - pose.x, frame[p].y - pose.y))
+        in_place = frame[place].inverse().compose(pose)
+        sigma_xy = math.sqrt(max(covariance[0, 0], covariance[1, 1], 0.0)) or None
+        sigma_yaw = math.sqrt(max(covariance[2, 2], 0.0)) or None
+        self._operator_acted()
+        localiser.set_pose(place, in_place.as_tuple(), sigma_xy, sigma_yaw)
+        log.info("pose set from %s: place %d at %s", settings.initial_pose_topic, place,
+                 in_place)
+        self.publish_event("pose_set", source=settings.initial_pose_topic, place=place,
+                           x=round(in_place.x, 4), y=round(in_place.y, 4),
+                           yaw=round(in_place.yaw, 5))
 
     def _running_localiser(self) -> Localiser:
         """The processing step's localiser; refused while the step (re)starts."""

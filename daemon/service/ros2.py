@@ -25,13 +25,16 @@ AMCL does (``amcl_node.cpp``): ``map -> odom`` = (map -> base) ∘ (odom -> base
 pose and the base's odometry at the frame's stamp, post-dated by
 ``transform_tolerance_s`` and re-sent every ``tf_period_s`` while tracking, nothing
 before the first tracked pose; and with ``odom_tf`` the odometry itself as ``odom ->
-base_link`` (for a base no ROS driver publishes).
+base_link`` (for a base no ROS driver publishes). It subscribes to ``[ros2]
+initial_pose_topic`` (rviz's 2D Pose Estimate): the caller sets the pose from it.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -58,6 +61,7 @@ TF_QOS_KEYEXPR = "::,100:,:,:,,"  # tf2's publisher depth
 GID_LENGTH = 16
 
 _TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+log = logging.getLogger(__name__)
 
 
 def mangle(name: str) -> str:
@@ -92,6 +96,31 @@ def publisher_token(domain_id: int, zid: str, node_id: int, entity_id: int,
     return (f"@ros2_lv/{domain_id}/{zid}/{node_id}/{entity_id}/MP/{mangle('/')}/"
             f"{mangle('/')}/{NODE_NAME}/{mangle(topic)}/{mangled_type(msg_type)}/"
             f"{type_hash(msg_type)}/{qos}")
+
+
+def subscription_token(domain_id: int, zid: str, node_id: int, entity_id: int,
+                       topic: str, msg_type: str = MSG_TYPE, qos: str = QOS_KEYEXPR) -> str:
+    return publisher_token(domain_id, zid, node_id, entity_id, topic, msg_type, qos
+                           ).replace(f"/{entity_id}/MP/", f"/{entity_id}/MS/", 1)
+
+
+def decode_pose(payload: bytes) -> tuple[SE2, np.ndarray, str]:
+    """A PoseWithCovarianceStamped from CDR: the pose in the plane, the 3x3 covariance of
+    (x, y, yaw) taken from rows/columns (0, 1, 5), and ``header.frame_id``. ValueError for
+    a payload that is not one."""
+    try:
+        msg: Any = _TYPESTORE.deserialize_cdr(payload, MSG_TYPE)
+    except Exception as e:  # noqa: BLE001 - rosbags raises several kinds on bad bytes
+        raise ValueError(f"not a {MSG_TYPE}: {e}") from e
+    p, q = msg.pose.pose.position, msg.pose.pose.orientation
+    yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+    full = np.asarray(msg.pose.covariance, dtype=np.float64).reshape(6, 6)
+    idx = np.array([0, 1, 5])
+    values = (p.x, p.y, yaw, *full[np.ix_(idx, idx)].ravel())
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f"a {MSG_TYPE} with values that are not finite")
+    return SE2(float(p.x), float(p.y), yaw), full[np.ix_(idx, idx)].copy(), \
+        str(msg.header.frame_id)
 
 
 def gid(token: str) -> bytes:
@@ -189,6 +218,24 @@ class Ros2PosePublisher:
         self.gid = self._pose.gid
         self._tf = _Publisher(session, settings.domain_id, zid, node_id, 2, TF_TOPIC,
                               TF_TYPE, TF_QOS_KEYEXPR) if settings.tf else None
+        self._session, self._zid, self._node_id = session, zid, node_id
+        self._subscribers: list[Any] = []
+
+    def on_initial_pose(self, handle: Callable[[SE2, np.ndarray, str], None]) -> None:
+        """Subscribe to ``[ros2] initial_pose_topic`` (any publisher's type hash) and hand
+        each decoded pose to ``handle``; a sample that is not a pose is logged and dropped."""
+        s = self.settings
+        key = f"{s.domain_id}/{s.initial_pose_topic.strip('/')}/{MANGLED_TYPE}/*"
+
+        def received(sample: zenoh.Sample) -> None:
+            try:
+                handle(*decode_pose(sample.payload.to_bytes()))
+            except ValueError as e:
+                log.warning("%s: %s; ignored", s.initial_pose_topic, e)
+
+        self._subscribers.append(self._session.declare_subscriber(key, received))
+        self._subscribers.append(self._session.liveliness().declare_token(subscription_token(
+            s.domain_id, self._zid, self._node_id, 3, s.initial_pose_topic)))
 
     def publish(self, pose: SE2, covariance: np.ndarray, stamp_ns: int) -> None:
         """``stamp_ns``: the frame's time since the UNIX epoch (ROS time)."""
@@ -207,6 +254,8 @@ class Ros2PosePublisher:
         self._tf.put(tf_cdr(transforms))
 
     def close(self) -> None:
+        for subscriber in self._subscribers:
+            subscriber.undeclare()
         self._node_token.undeclare()
         self._pose.close()
         if self._tf is not None:
