@@ -79,6 +79,9 @@ class Tally:
     frames: int = 0
     right: int = 0
     wrong: int = 0
+    wrong_after_kidnap: int = 0  # of those, within --after frames of a kidnap
+    kidnap_frame: int = -10**9  # the frame of the last kidnap
+    wrong_confidence: list[float] = field(default_factory=list)  # of the wrong frames
     learn_failures: int = 0
     operator_learns: int = 0
     operator_refused: int = 0
@@ -161,7 +164,10 @@ class Endurance:
         tracking = belief.state == "tracking" and error is not None
         right = tracking and error is not None and error <= RIGHT_M
         t.right += right
-        t.wrong += tracking and error is not None and error > max(RIGHT_M, 3 * _sigma(belief))
+        if tracking and error is not None and error > max(RIGHT_M, 3 * _sigma(belief)):
+            t.wrong += 1
+            t.wrong_after_kidnap += t.frames - t.kidnap_frame <= self.args.after
+            t.wrong_confidence.append(belief.confidence)
         if belief.state == "tracking" and belief.place_id is not None \
                 and belief.pose_in_place is not None and belief.covariance is not None:
             self.saved = SavedPose(belief.place_id, belief.pose_in_place,
@@ -230,7 +236,7 @@ class Endurance:
             r.robot.kidnap(ref.x, ref.y, float(self.rng.uniform(-math.pi, math.pi)),
                            waypoint=here - (here - heading) % lap if heading <= here
                            else heading)
-            t.open_kidnap = ("mapped", t.frames, now_s)
+            t.open_kidnap, t.kidnap_frame = ("mapped", t.frames, now_s), t.frames
         elif action == "unmapped":
             refs = [(ref.x, ref.y) for ref in r.references.values()]
             ahead = [k for k in range(r.robot.waypoint + 1, len(self.waypoints))
@@ -241,7 +247,7 @@ class Endurance:
             k = ahead[0]
             r.robot.kidnap(*self.waypoints[k], float(self.rng.uniform(-math.pi, math.pi)),
                            waypoint=min(k + 1, len(self.waypoints) - 1))
-            t.open_kidnap = ("unmapped", t.frames, now_s)
+            t.open_kidnap, t.kidnap_frame = ("unmapped", t.frames, now_s), t.frames
         t.events.append({"t_s": round(now_s, 1), "event": action})
 
 
@@ -276,6 +282,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             "frames": t.frames,
             "tracking_fraction": round(t.right / max(t.frames, 1), 4),
             "tracking_wrong_fraction": round(t.wrong / max(t.frames, 1), 4),
+            "tracking_wrong_frames": t.wrong,
+            "tracking_wrong_after_kidnap": t.wrong_after_kidnap,
+            "tracking_wrong_confidence_max": round(max(t.wrong_confidence), 3)
+            if t.wrong_confidence else None,
             "mapped_kidnaps": len(t.mapped),
             "mapped_kidnap_recovered_within_10": round(sum(t.mapped) / len(t.mapped), 4)
             if t.mapped else None,
