@@ -15,9 +15,9 @@ daemon's loop. The evaluator (and only it) reads the truth:
   seen (later laps come back through it and through the first area);
 - a *restart* is a fresh daemon state on the same map file (a new Mapper, MappingSession
   and Localiser), resumed from the pose tracked last, as the daemon saves and resumes it;
-- an *operator's learn* is a learn the evaluator asks for where the robot stands, at the
-  first frame from its time on when no place stands within ``min_distance_m`` of the robot
-  in truth (an operator sees the robot and the places).
+- an *operator's learn* is a learn asked for by name (the operator pre-empting the
+  autopilot, as the daemon lets it): from its time on, the next time the autopilot wants a
+  place, the operator's learn is made there instead.
 
 Metrics: ``tracking_fraction`` (of the frames the localiser sees, those ``tracking``
 within 0.5 m of the truth in the place it names: the right place, or in a new segment
@@ -180,17 +180,16 @@ class Endurance:
             elif kind == "unmapped" and right:
                 t.unmapped_s.append(r.robot.now_ns() / 1e9 - at_s)
                 t.open_kidnap = None
-        if self.operator_due and self._operator_may_learn():
+        why = r.session.wants_place(belief, r.localiser.odometry.latest, job_running=False)
+        if why is not None and self.operator_due:
             self.operator_due -= 1
             t.operator_learns += 1
             try:
-                if not self._learn("operator", "the operator asked"):
+                if not self._learn("operator", f"the operator asked ({why})"):
                     t.operator_refused += 1
             except PlacecellError:
                 t.operator_refused += 1
-            return
-        why = r.session.wants_place(belief, r.localiser.odometry.latest, job_running=False)
-        if why is not None:
+        elif why is not None:
             self._learn("autopilot", why)
         elif belief.acquisition is not None:
             r.localiser.learning_not_started()  # not now: acquisition asks again
@@ -211,13 +210,6 @@ class Endurance:
                                   "event": "learned", "place": place.id, "by": started_by,
                                   "why": why})
         return True
-
-    def _operator_may_learn(self) -> bool:
-        """No place within ``min_distance_m`` of the robot, in truth."""
-        x, y, _ = self.r.robot.true_pose()
-        return all(math.dist((x, y), (ref.x, ref.y))
-                   >= self.r.cfg.mapping.acquisition.min_distance_m
-                   for ref in self.r.references.values())
 
     def _act(self, action: str) -> None:
         r, t = self.r, self.tally
