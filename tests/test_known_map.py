@@ -9,9 +9,12 @@ import threading
 import numpy as np
 import pytest
 
+from daemon.config import load
 from daemon.localisation.known_map import KnownMap, MapHolder
+from daemon.localisation.localiser import Localiser, PoseRequest
 from daemon.mapping.transition import Transition
 from kernel.se2 import SE2, UncertainSE2
+from kernel.types import Frame
 from tests.map_fixtures import synthetic_place
 
 
@@ -86,3 +89,24 @@ def test_changes_from_many_threads_are_all_kept_and_readers_see_whole_snapshots(
     known = holder.current
     for a in (1, 4, 7):
         assert sorted(known.neighbours(a)) == [b for b in range(1, 10) if b != a]
+
+
+def test_a_pose_asked_in_a_place_the_frames_map_lacks_waits_for_the_next_frame() -> None:
+    """A learn job stores a place and asks for tracking at its reference from its own
+    thread; a frame that took its map just before sees the request but not the place:
+    the request waits for the next frame instead of failing the frame."""
+    cfg = load(None)
+    rng = np.random.default_rng(11)
+    a, b = (dataclasses.replace(synthetic_place(rng), id=k) for k in (1, 2))
+    holder = MapHolder(KnownMap.of([a]))
+    localiser = Localiser(cfg.mirror, cfg.panorama, settings=cfg.localisation,
+                          known_map=holder)
+    image = rng.integers(0, 256, (cfg.camera.sim.image_height, cfg.camera.sim.image_width, 3),
+                         dtype=np.uint8)
+    localiser._pose_request = PoseRequest(b.id, (0.0, 0.0, 0.0), 0.03, 0.03)
+    localiser.process_frame(Frame(image, 1_000_000_000, 1))
+    assert localiser.tracker is None and localiser._pose_request is not None
+    holder.replace(lambda m: m.with_places([b]))
+    localiser.process_frame(Frame(image, 1_100_000_000, 2))
+    assert localiser.tracker is not None and localiser.tracker.place.id == b.id
+    assert localiser._pose_request is None

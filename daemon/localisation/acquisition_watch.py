@@ -96,8 +96,9 @@ class AcquisitionWatch:
                 score: Scorer) -> WatchStep:
         """The watched place's LRP in this frame, whether to learn a new place, a
         background LRP measured as the robot left a place behind, and a revisit."""
-        learned, self._watch_next = self._watch_next, None  # set from other threads
-        if learned is not None and learned in known:
+        learned = self._watch_next  # set from other threads
+        if learned is not None and learned in known:  # else stored after this frame's map
+            self._watch_next = None
             self._watch(known, learned, learned=True)
             self._awaiting_place = False
         if self._watched is None and not self._awaiting_place and tracked.tracking \

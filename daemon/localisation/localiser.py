@@ -653,9 +653,11 @@ class Localiser:
                                  self._frames - began_frame)
 
     def _apply_pose_request(self, grey: np.ndarray, odo: Odometry | None) -> bool:
-        request, self._pose_request = self._pose_request, None
-        if request is None:
-            return False
+        request = self._pose_request
+        if request is None or request.place_id not in self.map:
+            return False  # a place stored while this frame's map was taken: the next frame
+        if self._pose_request is request:  # not replaced by another thread meanwhile
+            self._pose_request = None
         self.tracker = PlaceTracker(self.map.places[request.place_id].place, self.settings,
                                     self.model, self.rng)
         self.tracker.start(grey, request.pose, request.sigma_xy, request.sigma_yaw)
