@@ -246,9 +246,15 @@ def test_an_initial_pose_from_ros2_moves_the_pose_there(tmp_path: Path,
             publisher.put(initial(*target, "odom"))  # another frame: ignored
             publisher.put(initial(*target, "map"))
             assert wait_for(lambda: any(e["event"] == "pose_set" for e in events), 30), events
-            n = len(poses)
-            assert wait_for(lambda: any(p["map"] for p in poses[n:]), 30)
-            after = next(p["map"] for p in poses[n:] if p["map"])
+            set_ns = next(e["stamp_ns"] for e in events if e["event"] == "pose_set")
+
+            # A frame captured before the pose was set may be published after the event
+            # (its processing was under way): the first one captured after it counts.
+            def set_since() -> list[dict]:
+                return [p["map"] for p in poses if p["stamp_ns"] > set_ns and p["map"]]
+
+            assert wait_for(lambda: bool(set_since()), 30)
+            after = set_since()[0]
         finally:
             session.close()
     set_events = [e for e in events if e["event"] == "pose_set"]
