@@ -546,9 +546,8 @@ class Daemon:
             if odo is not None:  # map -> odom = map -> base ∘ (odom -> base)⁻¹, as AMCL
                 odom_base = SE2(odo.x, odo.y, odo.yaw)
                 self._map_odom = in_map.compose(odom_base.inverse())
-                self._ros2.publish_tf(
-                    self._map_odom, epoch_ns + int(settings.transform_tolerance_s * 1e9),
-                    odom_base if settings.odom_tf else None, epoch_ns)
+                self._ros2.publish_tf(self._map_odom, epoch_ns,
+                                      odom_base if settings.odom_tf else None)
         except Exception as e:  # noqa: BLE001 - zenoh shutting down
             log.debug("publish ROS 2 pose failed: %s", e)
 
@@ -560,8 +559,7 @@ class Daemon:
                 or belief.state != "tracking":
             return
         try:
-            self._ros2.publish_tf(self._map_odom, time.time_ns() + int(
-                self.config.ros2.transform_tolerance_s * 1e9))
+            self._ros2.publish_tf(self._map_odom, time.time_ns())
         except Exception as e:  # noqa: BLE001 - zenoh shutting down
             log.debug("publish map -> odom failed: %s", e)
 

@@ -24,13 +24,14 @@ from typing import Any, Literal
 import numpy as np
 
 from daemon.localisation.belief import Belief
-from daemon.localisation.known_map import KnownMap, MapHolder
+from daemon.localisation.known_map import KnownMap
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.place import Place
 from daemon.mapping.settings import AcquisitionSettings
 from daemon.mapping.transition import Transition
 from daemon.mapping.unmapped import UnmappedWatch
 from daemon.service.mapper import Link, Mapper, Seen
+from daemon.service.pipeline import holder_of
 from kernel.errors import PlacecellError
 from kernel.types import Odometry
 
@@ -87,9 +88,7 @@ class MappingSession:
         self.mode: Mode = mode
         self._lock = threading.Lock()  # one change of the map at a time
         with mapper.lock:
-            graph = mapper.graph
-            self.holder = MapHolder(KnownMap.of(graph.places, graph.transitions,
-                                                graph.features))
+            self.holder = holder_of(mapper.graph)
         self.unmapped = UnmappedWatch(acquisition)
 
     @property

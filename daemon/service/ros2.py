@@ -137,6 +137,17 @@ def attachment(sequence: int, stamp_ns: int, publisher_gid: bytes) -> bytes:
     return out
 
 
+def _time(stamp_ns: int) -> Any:
+    return _TYPESTORE.types["builtin_interfaces/msg/Time"](sec=stamp_ns // 1_000_000_000,
+                                                          nanosec=stamp_ns % 1_000_000_000)
+
+
+def _quaternion(yaw: float) -> Any:
+    """A rotation about z by ``yaw`` (rad)."""
+    return _TYPESTORE.types["geometry_msgs/msg/Quaternion"](
+        x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
+
+
 def pose_cdr(pose: SE2, covariance: np.ndarray, stamp_ns: int, frame_id: str) -> bytes:
     """PoseWithCovarianceStamped in CDR: ``pose`` (map frame) with its 3x3 covariance of
     (x, y, yaw) spread into ROS's 6x6 (x, y, z, roll, pitch, yaw)."""
@@ -145,22 +156,15 @@ def pose_cdr(pose: SE2, covariance: np.ndarray, stamp_ns: int, frame_id: str) ->
     idx = np.array([0, 1, 5])
     full[np.ix_(idx, idx)] = np.asarray(covariance, float).reshape(3, 3)
     msg = t[MSG_TYPE](
-        header=t["std_msgs/msg/Header"](
-            stamp=t["builtin_interfaces/msg/Time"](sec=stamp_ns // 1_000_000_000,
-                                                   nanosec=stamp_ns % 1_000_000_000),
-            frame_id=frame_id),
+        header=t["std_msgs/msg/Header"](stamp=_time(stamp_ns), frame_id=frame_id),
         pose=t["geometry_msgs/msg/PoseWithCovariance"](
             pose=t["geometry_msgs/msg/Pose"](
                 position=t["geometry_msgs/msg/Point"](x=pose.x, y=pose.y, z=0.0),
-                orientation=t["geometry_msgs/msg/Quaternion"](
-                    x=0.0, y=0.0, z=math.sin(pose.yaw / 2.0), w=math.cos(pose.yaw / 2.0))),
+                orientation=_quaternion(pose.yaw)),
             covariance=full.reshape(36)))
     return bytes(_TYPESTORE.serialize_cdr(msg, MSG_TYPE))
 
 
-def _time(stamp_ns: int) -> Any:
-    return _TYPESTORE.types["builtin_interfaces/msg/Time"](sec=stamp_ns // 1_000_000_000,
-                                                          nanosec=stamp_ns % 1_000_000_000)
 
 
 def tf_cdr(transforms: list[tuple[str, str, SE2, int]]) -> bytes:
@@ -172,8 +176,7 @@ def tf_cdr(transforms: list[tuple[str, str, SE2, int]]) -> bytes:
         child_frame_id=child,
         transform=t["geometry_msgs/msg/Transform"](
             translation=t["geometry_msgs/msg/Vector3"](x=T.x, y=T.y, z=0.0),
-            rotation=t["geometry_msgs/msg/Quaternion"](
-                x=0.0, y=0.0, z=math.sin(T.yaw / 2.0), w=math.cos(T.yaw / 2.0))))
+            rotation=_quaternion(T.yaw)))
         for parent, child, T, stamp_ns in transforms]
     return bytes(_TYPESTORE.serialize_cdr(t[TF_TYPE](transforms=stamped), TF_TYPE))
 
@@ -241,16 +244,17 @@ class Ros2PosePublisher:
         """``stamp_ns``: the frame's time since the UNIX epoch (ROS time)."""
         self._pose.put(pose_cdr(pose, covariance, stamp_ns, self.settings.frame_id))
 
-    def publish_tf(self, map_odom: SE2, stamp_ns: int, odom_base: SE2 | None = None,
-                   odom_stamp_ns: int = 0) -> None:
-        """map -> odom stamped ``stamp_ns`` (post-dated by the caller), and odom -> base
-        at ``odom_stamp_ns`` when given (ROS time, ns since the UNIX epoch)."""
+    def publish_tf(self, map_odom: SE2, stamp_ns: int, odom_base: SE2 | None = None) -> None:
+        """map -> odom valid from ``stamp_ns`` (ROS time, ns since the UNIX epoch),
+        stamped ``transform_tolerance_s`` later as AMCL post-dates it; and odom -> base at
+        ``stamp_ns`` itself when given."""
         if self._tf is None:
             return
         s = self.settings
-        transforms = [(s.frame_id, s.odom_frame, map_odom, stamp_ns)]
+        ahead_ns = int(s.transform_tolerance_s * 1e9)
+        transforms = [(s.frame_id, s.odom_frame, map_odom, stamp_ns + ahead_ns)]
         if odom_base is not None:
-            transforms.append((s.odom_frame, s.base_frame, odom_base, odom_stamp_ns))
+            transforms.append((s.odom_frame, s.base_frame, odom_base, stamp_ns))
         self._tf.put(tf_cdr(transforms))
 
     def close(self) -> None:
