@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -70,6 +71,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="stop after this much simulated time")
     p.add_argument("--world", help="a world file or generate:<kind>:<seed> (default: from "
                    "--world-kind and --world-seed)")
+    p.add_argument("--trace", help="write one JSON line per frame here (state, place, "
+                   "error, sigma, confidence, event): where wrong frames come from")
 
 
 @dataclass
@@ -146,6 +149,25 @@ class Endurance:
         self.saved: SavedPose | None = None  # where a restart resumes
         self.operator_due = 0  # operator learns asked for and not yet made
         self.rng = np.random.default_rng(args.seed)
+        self.trace = None if not getattr(args, "trace", None) else \
+            open(args.trace, "w", encoding="utf-8")  # noqa: SIM115 (closed by run())
+
+    def _trace(self, belief: Belief, error: float | None) -> None:
+        r = self.r
+        x, y, _ = r.robot.true_pose()
+        nearest = min(r.references, default=None,
+                      key=lambda p: math.dist((x, y),
+                                              (r.references[p].x, r.references[p].y)))
+        assert self.trace is not None
+        self.trace.write(json.dumps({
+            "frame": self.tally.frames, "t_s": round(r.robot.now_ns() / 1e9, 2),
+            "state": belief.state, "place": belief.place_id, "nearest": nearest,
+            "error_m": None if error is None else round(error, 3),
+            "sigma_m": round(_sigma(belief), 3) if belief.covariance else None,
+            "confidence": belief.confidence,
+            "event": None if belief.event is None else
+            f"{belief.event.kind} {belief.event.place_id} {belief.event.how}",
+            "switched_from": belief.switched_from, "reason": belief.reason}) + "\n")
 
     def run(self) -> None:
         r, args = self.r, self.args
@@ -155,6 +177,8 @@ class Endurance:
             while todo and r.robot.waypoint >= todo[0][0]:
                 self._act(todo.pop(0)[1])
             self._frame()
+        if self.trace is not None:
+            self.trace.close()
 
     def _frame(self) -> None:
         r, t = self.r, self.tally
@@ -168,6 +192,8 @@ class Endurance:
             t.wrong += 1
             t.wrong_after_kidnap += t.frames - t.kidnap_frame <= self.args.after
             t.wrong_confidence.append(belief.confidence)
+        if self.trace is not None:
+            self._trace(belief, error)
         if belief.state == "tracking" and belief.place_id is not None \
                 and belief.pose_in_place is not None and belief.covariance is not None:
             self.saved = SavedPose(belief.place_id, belief.pose_in_place,
