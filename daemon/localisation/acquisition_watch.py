@@ -69,7 +69,7 @@ class WatchStep:
 class AcquisitionWatch:
     def __init__(self, settings: AcquisitionSettings, matcher: FastMatcher,
                  wrap_margin: int, default_background: float) -> None:
-        self.acquisition = PlaceAcquisition(settings)
+        self.acquisition = PlaceAcquisition(settings, default_background)
         self.settings = settings
         self._matcher = matcher
         self._wrap_margin = wrap_margin

@@ -41,8 +41,12 @@ class AcquisitionDecision:
 
 
 class PlaceAcquisition:
-    def __init__(self, settings: AcquisitionSettings) -> None:
+    def __init__(self, settings: AcquisitionSettings, default_background: float = 0.7) -> None:
+        """``default_background``: the background LRP of a place never measured (the
+        thesis's 0.7, ``[localisation] background_lrp``): a place whose smoothed LRP falls
+        below it is left behind at once (§7.1)."""
         self.settings = settings
+        self.default_background = default_background
         self._n = max(2, int(round(settings.window_m / settings.sample_step_m)))
         self.place_id: int | None = None
         self.reset(None)
@@ -97,7 +101,7 @@ class PlaceAcquisition:
                 or self._away() < s.min_distance_m:  # a tour turning back near the place
             return None
         assert self.place_id is not None
-        if m < s.lrp_background:  # below the default background: reached at once
+        if m < self.default_background:  # below the default background: reached at once
             return self._decision(m, m)
         # Beyond the thesis: learn the next place while this one is still recognised, by
         # ``coverage_margin`` above the background it is expected to settle at, so the

@@ -36,8 +36,10 @@ class TblSettings:
     turn_tolerance_rad: float = setting(0.1, gt=0.0, le=1.0, doc="likewise for the heading "
                                         "each leg must end with (a differential base's turns; "
                                         "0 for the others)")
-    search_cols: int = setting(12, ge=2, le=64, doc="tracking window half-width (columns)")
-    search_rows: int = setting(6, ge=1, le=32, doc="tracking window half-height (rows)")
+    window_cols: int = setting(12, ge=2, le=64, doc="tracking window half-width (columns) "
+                               "around the EKF's predicted bearing (localisation's window, "
+                               "[localisation] search_cols, adds the estimate's spread)")
+    window_rows: int = setting(6, ge=1, le=32, doc="tracking window half-height (rows)")
     initial_depth_m: float = setting(2.5, gt=0.0, le=50.0, doc="EKF prior depth (§4.6)")
     reference_bearing_sigma_deg: float = setting(
         0.1, gt=0.0, le=10.0, doc="EKF prior on a landmark's reference bearing: measured in "
@@ -53,11 +55,11 @@ class TblSettings:
         "to the NCC term: a template on a landmark that appears larger or smaller than when "
         "cut slides, the same way every frame. With the scale above it keeps the 2-sigma "
         "coverage honest in `placecell-eval depth` (markers 0.7 m away and a 7 x 10 m room)")
-    max_zoom: float = setting(
+    ekf_max_zoom: float = setting(
         1.5, ge=1.0, le=100.0, doc="EKF: bearings are used only while the landmark appears "
         "at most this much larger or smaller than in the reference (template matching is not "
         "scale invariant: beyond it a track slides off; the thesis shortened its cross toward "
-        "the corridor walls, §4.6.4)")
+        "the corridor walls, §4.6.4); zoom_noise_rad lets it exceed localisation's max_zoom")
 
 
 @dataclass(frozen=True)
@@ -111,9 +113,9 @@ class AcquisitionSettings:
                               "baseline, in metres travelled")
     slope_threshold: float = setting(0.01, gt=0.0, le=1.0, doc="background: the smoothed "
                                      "change of the smoothed LRP over window_m below this...")
-    lrp_background: float = setting(0.7, ge=0.0, le=1.0, doc="...while the LRP is between "
-                                    "this (below it counts as background at once)...")
-    lrp_max: float = setting(0.85, ge=0.0, le=1.0, doc="...and this")
+    lrp_max: float = setting(0.85, ge=0.0, le=1.0, doc="...while the LRP is between "
+                             "[localisation] background_lrp (below it counts as background "
+                             "at once) and this")
     min_distance_m: float = setting(0.75, ge=0.0, le=100.0, doc="at least this far "
                                     "from the last place (by odometry, and travelled as far) "
                                     "and from any the map puts near the tracked estimate "

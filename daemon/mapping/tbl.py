@@ -20,7 +20,7 @@ changes (``light_change``): NCC ignores gain, but a brighter scene saturates bri
 pixels and takes their pattern away (``keep_in_light``).
 
 A bearing feeds the EKF only while the landmark looks about as large as in the reference
-(``max_zoom``): approaching a wall 3x closer, a template slides off its point yet still
+(``ekf_max_zoom``): approaching a wall 3x closer, a template slides off its point yet still
 matches well.
 No device, no clock: the runner (daemon/service/learning.py) does the I/O.
 """
@@ -177,9 +177,9 @@ class TurnBackAndLook:
                               for e in estimates])
         zoom = np.array([_zoom(e.depth, e.bearing, pose) for e in estimates])
         result = track(grey, self.margin, self.templates, predicted, self.rows,
-                       self.settings.search_cols, self.settings.search_rows)
+                       self.settings.window_cols, self.settings.window_rows)
         bearings = column_to_bearing_of_centre(result.cols, self.width)  # robot frame
-        limit = math.log(self.settings.max_zoom)
+        limit = math.log(self.settings.ekf_max_zoom)
         for i, (bearing, score) in enumerate(zip(bearings, result.scores, strict=True)):
             log_zoom = math.log(zoom[i])
             if abs(log_zoom) <= limit:
