@@ -29,7 +29,6 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
@@ -41,7 +40,7 @@ from daemon.localisation.belief import (
     LocalisationEvent,
     PlaceScore,
 )
-from daemon.localisation.global_localisation import LeadWatch, LossDetector, PlaceSearch
+from daemon.localisation.global_localisation import PlaceSearch
 from daemon.localisation.known_map import KnownMap, MapHolder
 from daemon.localisation.local_positioning import LocalResult, PlaceTracker
 from daemon.localisation.odometry import OdometryBuffer, relative_motion
@@ -50,6 +49,7 @@ from daemon.localisation.place_switching import (
     PlaceSwitcher,
     reliable,
 )
+from daemon.localisation.relocalisation import Mode, Relocalisation
 from daemon.localisation.sensor_models import make_model
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.acquisition import (
@@ -89,9 +89,6 @@ GRAPH_MIN_SIGMA_M = 0.3
 # Places nearest the tracked one by transitions that recognition and the bridge consider.
 THROUGH_GRAPH_PLACES = 64
 
-# What the localiser is doing (design §9).
-Mode = Literal["search", "confirm", "track", "recover"]
-RECOVERY_STEPS = {1: "local", 2: "place"}  # §9.3.2; step 3 is the global search
 MAX_RIVALS = 7  # look-alikes of the pick within the margin that take part in a decision
 
 
@@ -160,25 +157,26 @@ class Localiser:
         # out of the place's view, the start of a transition to the place relocalisation
         # finds (_bridge).
         self._fix: Fix | None = None
-        self._ambiguous_frames = 0  # the search's pick ambiguous this many frames in a row
         self._told_apart: Disambiguation | None = None  # in this frame
         self._floor_learned: FloorModel | None = None  # in this frame
-        self._undecided: int | None = None  # the search's pick while look-alikes stand tied
         self._frames = 0
-        self.mode: Mode = "search"
-        self.search = PlaceSearch(self.settings)
-        self.loss = LossDetector(self.settings)
-        self.lead_watch = LeadWatch(self.settings)
+        # Search, loss and recovery (design §9): daemon/localisation/relocalisation.py.
+        self.reloc = Relocalisation(self.settings)
         self._relocalise_requested = False
-        self._step = 0  # the recovery step under way (mode "recover")
-        self._mode_frames = 0  # frames in this mode or recovery step
-        self._episode: tuple[int, int] | None = None  # (stamp, frame) the loss or search began
-        self._confirming = "global"  # how the place being confirmed was chosen
         p = self.unwarper.panorama
         self.local_space = LocalSpace((p.height, p.width),
                                       int(math.floor(self.unwarper.horizon_row())),
                                       self.unwarper.floor_distance_of_rows()
                                       ) if self.settings.local_space else None
+
+    @property
+    def mode(self) -> Mode:
+        """What the localiser is doing: search, confirm, track, recover (design §9)."""
+        return self.reloc.mode
+
+    @property
+    def search(self) -> PlaceSearch:
+        return self.reloc.search
 
     # ------------------------------------------------------------------ the map
     @property
@@ -395,108 +393,35 @@ class Localiser:
     def _supervise(self, prepare: Callable[[], PreparedPanorama], grey: np.ndarray,
                    local: LocalResult | None, stamp_ns: int, travelled_m: float
                    ) -> tuple[list[PlaceScore], LocalisationEvent | None]:
-        """Search, loss detection and recovery for this frame (module docstring): the
-        places recognised by the search, and the event this frame brings, if any."""
+        """Search, loss detection and recovery for this frame (the state machine of
+        daemon/localisation/relocalisation.py): the places recognised by the search,
+        and the event this frame brings, if any."""
         places = list(self.map.places)
+        reloc = self.reloc
         if self._relocalise_requested:
             self._relocalise_requested = False
-            self._begin_search(stamp_ns)
+            reloc.begin_search(stamp_ns, self._frames)
         if not places:
             return [], None
-        if self.mode == "search":
-            if self._episode is None:
-                self._episode = (stamp_ns, self._frames)
-            first = (self.tracker.place.id,) if self.tracker is not None else ()
-            found_in = self._search_step(prepare, grey, places, first)
-            best = self.search.best(places)
-            pick = None if best is None else self._tell_apart(grey, best.place_id, places)
-            # Waiting on look-alikes' features (design §5): the lower levels' pick is the
-            # most likely place meanwhile.
-            self._undecided = best.place_id if best is not None and pick is None else None
-            if pick is not None:
-                self._start_in(grey, pick)
-            return found_in, None
+        trackers = _FrameTrackers(self, prepare, grey)
+        if reloc.mode == "search":
+            current = None if self.tracker is None else self.tracker.place.id
+            return reloc.searching(trackers, places, stamp_ns, self._frames, current), None
         if local is None or self.tracker is None:
             return [], None  # a tracker started this frame
         current = self.tracker.place.id
-        lost_now = self.loss.observe(local.support, 0.0 if self._learning else travelled_m)
-        self._mode_frames += 1
-        scored: list[PlaceScore] = []
-        if self.mode != "confirm" and (self.loss.suspicious or self.mode == "recover"):
-            if not self.search.running:
-                self.search.reset(stamp_ns)
-            scored = self._search_step(prepare, grey, places,
-                                       (current, *self.map.neighbours(current)))
-        elif self.mode == "track":
-            self.search.reset(None)  # confident again: no background search
-        found = self._recovered(local)
-        if self.mode == "track":
-            led = self.lead_watch.observe(self.search, current, places, bool(scored))
-            if not lost_now and not led:
-                return scored, None
-            self._episode = (stamp_ns, self._frames)
-            s = self.settings
-            event = LocalisationEvent("lost", current, self.loss.why if lost_now else
-                                      f"another place led the search by "
-                                      f"{s.search_margin} for {s.led_frames} frames")
-            if not lost_now or _near_reference(self.tracker, s.bridge_from_m):
-                self._fix = None  # lost where the place is in view: carried off? no bridge
-            self.lead_watch.reset()
-            leader = self._leader(grey, current, places)
-            if leader is not None:
-                self._start_in(grey, leader)
-            else:
-                self._recover(grey, 1)
-            return scored, event
-        if self.mode == "confirm":
-            if found:
-                return scored, self._relocalised(current, self._confirming, stamp_ns)
-            if self._mode_frames >= self.settings.confirm_frames or lost_now:
-                self._begin_search(stamp_ns, rejected={current}, keep_episode=True)
-            return scored, None
-        # mode "recover": steps 1 and 2 of §9.3.2
-        if found:
-            # A pose found again where the search ranks another place above this one is a
-            # look-alike's (design §9: in the aliased corridor every such recovery after a
-            # kidnap was wrong, the true place at the top of the search on most).
-            ahead = self._leader(grey, current, places, self.settings.recovered_margin)
-            if ahead is not None:
-                self._start_in(grey, ahead)
-                return scored, None
-            # Found in a place with look-alikes is found in one of them: the view of this
-            # place cannot say which, their features can (design §5). Only features that
-            # clearly name another place move the robot there; unclear ones do not hold
-            # the recovery up (waiting cost the office's kidnaps their 10-frame mark).
-            told = self._tell_apart(grey, current, places, at_once=True)
-            if told is not None and told != current:
-                self._start_in(grey, told)
-                return scored, None
-            return scored, self._relocalised(current, RECOVERY_STEPS[self._step], stamp_ns)
-        leader = self._leader(grey, current, places)
-        if leader is not None:
-            self._start_in(grey, leader)
-        elif self._mode_frames >= self.settings.recovery_frames:
-            if self._step == 1:
-                self._recover(grey, 2)
-            else:  # step 3: the most likely place elsewhere, or search on without this one
-                best = self.search.best([p for p in places if p != current])
-                if best is not None:
-                    self._start_in(grey, best.place_id)
-                else:
-                    self._begin_search(stamp_ns, rejected={current}, keep_episode=True)
-        return scored, None
+        out = reloc.supervise(trackers, places, tuple(self.map.neighbours(current)), current,
+                              local.support, self._recovered(local),
+                              0.0 if self._learning else travelled_m, stamp_ns, self._frames)
+        return out.scores, out.event
 
-    def _leader(self, grey: np.ndarray, current: int, places: list[int],
-                margin: float | None = None) -> int | None:
-        """The place the search finds ahead of ``current`` by ``margin`` (by default
-        ``search_margin``: clearly, a kidnap, recovery goes global at once), told apart
-        from its look-alikes when their features are clear (the leader itself while they
-        are not); None while no place leads."""
-        leader = self.search.leader_over(current, places, margin)
-        if leader is None:
-            return None
-        told = self._tell_apart(grey, leader.place_id, places, at_once=True)
-        return leader.place_id if told is None else told
+    def _lost(self, by_sensor: bool) -> None:
+        """A loss declared: the last fix bridges to the place found next only when the
+        robot left the place's view on its own (a loss by the sensor output, away from
+        the reference); carried off where the place is in view, or another place leading
+        the search: no bridge."""
+        if not by_sensor or _near_reference(self.tracker, self.settings.bridge_from_m):
+            self._fix = None
 
     def _tell_apart(self, grey: np.ndarray, best: int, places: list[int],
                     at_once: bool = False) -> int | None:
@@ -522,10 +447,10 @@ class Localiser:
                   if p != best and p in places and top - lead <= s.ambiguity_margin]
         rivals = [p for p in rivals if frozenset((best, p)) in self.map.features][:MAX_RIVALS]
         if not rivals:
-            self._ambiguous_frames = 0
+            self.reloc.ambiguous_frames = 0
             return best  # no look-alike of it stands near: nothing for the features to do
-        self._ambiguous_frames += 1
-        if self._ambiguous_frames < s.ambiguity_frames and not at_once:
+        self.reloc.ambiguous_frames += 1
+        if self.reloc.ambiguous_frames < s.ambiguity_frames and not at_once:
             return None
         contenders = [best, *rivals]
         features: dict[tuple[int, int], Feature] = {}
@@ -542,10 +467,10 @@ class Localiser:
         # Clear: the winner's features are seen (its vote above 0) and part it from the
         # next; with no feature seen the votes differ only by the features' spans.
         clear = first > 0.0 and first - second >= s.disambiguation_min_evidence
-        if not clear and not at_once and self._ambiguous_frames < s.ambiguity_frames \
+        if not clear and not at_once and self.reloc.ambiguous_frames < s.ambiguity_frames \
                 + s.disambiguation_max_wait_frames:
             return None  # the features say little from here: look again on the next frame
-        self._ambiguous_frames = 0
+        self.reloc.ambiguous_frames = 0
         if not clear or scores[winner] - scores.get(best, 0.0) < s.disambiguation_min_vote:
             winner = best  # the features barely disagree with the lower levels: keep theirs
         runner_up = max((p for p in scores if p != winner
@@ -591,16 +516,6 @@ class Localiser:
         return local.support >= self.settings.recovered_output and reliable(
             local.estimate.covariance, local.confidence, self.settings)
 
-    def _begin_search(self, stamp_ns: int, rejected: set[int] | None = None,
-                      keep_episode: bool = False) -> None:
-        self.mode, self._mode_frames = "search", 0
-        self.search.reset(stamp_ns, rejected)
-        self.loss.reset()
-        self._undecided = None
-        self._ambiguous_frames = 0
-        if not keep_episode or self._episode is None:
-            self._episode = (stamp_ns, self._frames)
-
     def _start_in(self, grey: np.ndarray, place_id: int) -> None:
         """Global relocalisation's pick: particles over ``recovery_sigma_m`` around the
         place's reference, the orientation from the bearings (§9.3.2, eq. 8.34)."""
@@ -608,9 +523,6 @@ class Localiser:
                                self.rng)
         tracker.start_anywhere(grey, self.settings.recovery_sigma_m)
         self.tracker, self._closure = tracker, self._bridge(place_id)
-        self.mode, self._mode_frames, self._confirming = "confirm", 0, "global"
-        self.loss.reset()
-        self._ambiguous_frames = 0
 
     def _bridge(self, place_id: int) -> CycleClosure | None:
         """After a loss out of the last place's view, relocalisation's pick in a place
@@ -628,7 +540,7 @@ class Localiser:
         return CycleClosure(fix.place_id, place_id, fix.T_place_robot, fix.odometry, s,
                             after_confirmation=True)
 
-    def _recover(self, grey: np.ndarray, step: int) -> None:
+    def _spread(self, grey: np.ndarray, step: int) -> None:
         """§9.3.2 step 1: the particles around the estimate (σ recovery_local_sigma_m);
         step 2: over the whole place (σ recovery_sigma_m around its reference)."""
         assert self.tracker is not None and self.tracker.estimate is not None
@@ -638,19 +550,6 @@ class Localiser:
             self.tracker.move_to(self.tracker.estimate.pose, np.diag([r * r, r * r, r * r]))
         else:
             self.tracker.start_anywhere(grey, s.recovery_sigma_m)
-        self.mode, self._step, self._mode_frames = "recover", step, 0
-        self.loss.reset()
-        self._ambiguous_frames = 0
-
-    def _relocalised(self, place_id: int, how: str, stamp_ns: int) -> LocalisationEvent:
-        began_ns, began_frame = self._episode or (stamp_ns, self._frames)
-        self._episode = None
-        self.mode, self._mode_frames = "track", 0
-        self.loss.reset()
-        self.search.reset(None)
-        return LocalisationEvent("relocalised", place_id, how,
-                                 max(0.0, (stamp_ns - began_ns) / 1e9),
-                                 self._frames - began_frame)
 
     def _apply_pose_request(self, grey: np.ndarray, odo: Odometry | None) -> bool:
         request = self._pose_request
@@ -662,13 +561,7 @@ class Localiser:
                                     self.model, self.rng)
         self.tracker.start(grey, request.pose, request.sigma_xy, request.sigma_yaw)
         self._closure = None
-        self.loss.reset()
-        self.search.reset(None)
-        if request.confirm is None:
-            self.mode, self._mode_frames, self._episode = "track", 0, None  # operator knows
-        else:
-            self.mode, self._mode_frames, self._confirming = "confirm", 0, request.confirm
-            self._episode = (self._last_stamp_ns or 0, self._frames)
+        self.reloc.told(self._last_stamp_ns or 0, self._frames, request.confirm)
         return True
 
     def _recognise(self, prepared: PreparedPanorama, grey: np.ndarray, odo: Odometry | None
@@ -722,7 +615,7 @@ class Localiser:
                                              OdometryChain(odo, self.odometry_noise),
                                              self.settings)
         self.tracker = tracker
-        self.loss.reset()  # a new place's landmarks: its own evidence from here on
+        self.reloc.switched()  # a new place's landmarks: its own evidence from here on
         return tuple(scores), current
 
     def _observe_closure(self, local: LocalResult) -> Transition | None:
@@ -761,7 +654,7 @@ class Localiser:
             best = self.search.ranked()[:1]
             reason = f"global relocalisation: {done} of {n} places recognised" + (
                 f", most likely {best[0].place_id} (lead {best[0].lead:.3f})" if best else "")
-            tied = self._undecided if self.mode == "search" else None
+            tied = self.reloc.undecided if self.mode == "search" else None
             if tied is not None and tied in self.map.places:
                 reason += "; look-alikes stand tied: their features decide shortly"
                 return Belief(state="relocalising", reason=reason + no_odometry, event=event,
@@ -776,13 +669,13 @@ class Localiser:
         reason = f"tracking in place {place}"
         if self.mode == "confirm":
             chose = f"resumed in place {place} from the pose saved at the last stop" \
-                if self._confirming == "resumed" else \
+                if self.reloc.confirming == "resumed" else \
                 f"global relocalisation chose place {place}"
             state, reason = "relocalising", f"{chose}; waiting for a reliable estimate"
         elif self.mode == "recover":
             state = "lost"
-            reason = (f"lost in place {place}: recovery step {self._step} of 3 ("
-                      + ("particles around the estimate" if self._step == 1
+            reason = (f"lost in place {place}: recovery step {self.reloc.step} of 3 ("
+                      + ("particles around the estimate" if self.reloc.step == 1
                          else "particles over the whole place") + ")")
         return Belief(state=state, reason=reason + no_odometry, place_id=place,
                       place_label=tracker.place.label, pose_in_place=est.pose,
@@ -815,8 +708,32 @@ class Localiser:
                                          OdometryChain(odo, self.odometry_noise),
                                          self.settings)
         self.tracker = tracker
-        self.loss.reset()
+        self.reloc.switched()
         return current
+
+
+class _FrameTrackers:
+    """The localiser's side of relocalisation in one frame (relocalisation.Trackers):
+    the frame's grey panorama and its preparation, shared with the rest of the frame."""
+
+    def __init__(self, localiser: Localiser, prepare: Callable[[], PreparedPanorama],
+                 grey: np.ndarray) -> None:
+        self._localiser, self._prepare, self._grey = localiser, prepare, grey
+
+    def search_step(self, places: list[int], first: tuple[int, ...]) -> list[PlaceScore]:
+        return self._localiser._search_step(self._prepare, self._grey, places, first)
+
+    def tell_apart(self, best: int, places: list[int], at_once: bool = False) -> int | None:
+        return self._localiser._tell_apart(self._grey, best, places, at_once)
+
+    def start_in(self, place_id: int) -> None:
+        self._localiser._start_in(self._grey, place_id)
+
+    def spread(self, step: int) -> None:
+        self._localiser._spread(self._grey, step)
+
+    def lost(self, by_sensor: bool) -> None:
+        self._localiser._lost(by_sensor)
 
 
 def _merged(*groups: tuple[PlaceScore, ...] | list[PlaceScore]) -> tuple[PlaceScore, ...]:

@@ -1,0 +1,126 @@
+"""The relocalisation state machine (daemon/localisation/relocalisation.py, design §9):
+its decision rules on crafted inputs, and the machine driven through a loss, the two
+recovery steps of §9.3.2 and the global step, with crafted search scores."""
+
+from __future__ import annotations
+
+from daemon.localisation.belief import PlaceScore
+from daemon.localisation.relocalisation import (
+    Relocalisation,
+    after_confirming,
+    after_recovering,
+    after_tracking,
+)
+from daemon.localisation.settings import LocalisationSettings
+
+S = LocalisationSettings()
+
+
+def test_tracking_ends_on_a_loss_or_a_leader_only() -> None:
+    assert after_tracking(lost_now=False, led=False) == "track"
+    assert after_tracking(lost_now=True, led=False) == "lost"
+    assert after_tracking(lost_now=False, led=True) == "lost"
+
+
+def test_a_chosen_place_is_confirmed_by_a_reliable_estimate_or_rejected() -> None:
+    assert after_confirming(True, False, 1, S) == "relocalised"
+    assert after_confirming(True, True, S.confirm_frames, S) == "relocalised"  # found wins
+    assert after_confirming(False, False, S.confirm_frames - 1, S) == "wait"
+    assert after_confirming(False, False, S.confirm_frames, S) == "reject"
+    assert after_confirming(False, True, 1, S) == "reject"  # lost while confirming
+
+
+def test_recovery_steps_go_in_the_order_of_9_3_2() -> None:
+    assert after_recovering(True, 7, 1, 0, S) == "found"  # found first, leader or not
+    assert after_recovering(False, 7, 1, 0, S) == "leader"  # a clear leader: go there
+    assert after_recovering(False, None, 1, S.recovery_frames - 1, S) == "wait"
+    assert after_recovering(False, None, 1, S.recovery_frames, S) == "next step"
+    assert after_recovering(False, None, 2, S.recovery_frames, S) == "global"
+
+
+class Scripted:
+    """The localiser's side (relocalisation.Trackers) with crafted search scores."""
+
+    def __init__(self, machine: Relocalisation, leads: dict[int, float]) -> None:
+        self.machine, self.leads = machine, leads
+        self.calls: list[tuple[str, int]] = []
+
+    def search_step(self, places: list[int], first: tuple[int, ...]) -> list[PlaceScore]:
+        scored = [PlaceScore(p, 0.7 + self.leads.get(p, 0.0), self.leads.get(p, 0.0))
+                  for p in self.machine.search.to_score(places, first)]
+        self.machine.search.observe(scored)
+        return scored
+
+    def tell_apart(self, best: int, places: list[int], at_once: bool = False) -> int | None:
+        return best  # no look-alikes
+
+    def start_in(self, place_id: int) -> None:
+        self.calls.append(("start_in", place_id))
+
+    def spread(self, step: int) -> None:
+        self.calls.append(("spread", step))
+
+    def lost(self, by_sensor: bool) -> None:
+        self.calls.append(("lost", int(by_sensor)))
+
+
+def _frames(machine: Relocalisation, t: Scripted, n: int, support: float, found: bool,
+            places: list[int], current: int, first_frame: int) -> list:
+    events = []
+    for k in range(n):
+        out = machine.supervise(t, places, (), current, support, found, 0.05,
+                                (first_frame + k) * 100_000_000, first_frame + k)
+        events.append(out.event)
+    return events
+
+
+def test_a_loss_goes_through_both_recovery_steps_then_to_the_best_place_elsewhere() -> None:
+    places = [1, 2, 3]
+    machine = Relocalisation(S)
+    machine.told(0, 0, None)  # the operator set the pose in place 1
+    assert machine.mode == "track"
+    # Place 2 stands above its background, but never ahead of place 1 by search_margin.
+    t = Scripted(machine, {1: 0.2, 2: 0.2 + S.search_margin / 2, 3: -0.3})
+    events = _frames(machine, t, S.loss_frames, 0.01, False, places, 1, 1)
+    assert [e is not None for e in events] == [False] * (S.loss_frames - 1) + [True]
+    lost = events[-1]
+    assert lost.kind == "lost" and lost.place_id == 1 and "sensor output" in lost.how
+    assert machine.mode == "recover" and machine.step == 1
+    assert t.calls == [("lost", 1), ("spread", 1)]
+    _frames(machine, t, S.recovery_frames, 0.01, False, places, 1, 10)
+    assert machine.step == 2 and t.calls[-1] == ("spread", 2)
+    _frames(machine, t, S.recovery_frames, 0.01, False, places, 1, 20)
+    assert t.calls[-1] == ("start_in", 2)  # step 3: the most likely place but this one
+    assert machine.mode == "confirm"
+    events = _frames(machine, t, 1, 0.6, True, places, 2, 30)
+    assert events[0].kind == "relocalised" and events[0].how == "global"
+    # From the loss (frame 5) to the confirmation, by stamps and frames.
+    assert events[0].frames == 30 - S.loss_frames and machine.mode == "track"
+
+
+def test_a_clear_leader_sends_a_loss_straight_to_it() -> None:
+    places = [1, 2, 3]
+    machine = Relocalisation(S)
+    machine.told(0, 0, None)
+    t = Scripted(machine, {1: -0.2, 2: 0.3, 3: -0.3})
+    events = [e for e in _frames(machine, t, S.loss_frames, 0.01, False, places, 1, 1) if e]
+    # The search ran from the first low frame; place 2 led it for led_frames before the
+    # sensor rule's loss_frames: lost by the lead, and straight to place 2.
+    assert len(events) == 1 and "another place led" in events[0].how
+    assert t.calls == [("lost", 0), ("start_in", 2)] and machine.mode == "confirm"
+
+
+def test_a_rejected_pick_searches_on_without_it_and_found_again_in_step_one() -> None:
+    places = [1, 2]
+    machine = Relocalisation(S)
+    machine.told(0, 0, "resumed")
+    assert machine.mode == "confirm" and machine.confirming == "resumed"
+    t = Scripted(machine, {})
+    _frames(machine, t, S.confirm_frames, 0.5, False, places, 1, 1)
+    assert machine.mode == "search" and machine.search.rejected == {1}
+    # Tracking again; a brief low output is found again at recovery step 1.
+    machine.told(0, 100, None)
+    _frames(machine, t, S.loss_frames, 0.01, False, places, 1, 101)
+    assert machine.mode == "recover"
+    events = _frames(machine, t, 1, 0.6, True, places, 1, 110)
+    assert events[0].kind == "relocalised" and events[0].how == "local"
