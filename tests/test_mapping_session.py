@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from daemon.localisation.belief import Belief
+from daemon.localisation.belief import Belief, MapUpdates
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.acquisition import AcquisitionDecision
 from daemon.mapping.settings import AcquisitionSettings, OdometryNoiseSettings
@@ -67,8 +67,8 @@ def test_a_place_is_in_the_file_and_in_the_localisers_map_with_its_transitions(
 def test_a_closed_cycle_joins_segments_in_the_file_and_the_map_read(tmp_path: Path) -> None:
     session = _session(tmp_path / "map.db")
     a, b = _two_segments(session)
-    events = session.observe(_belief(closed_transition=Transition(a, b, T, "cycle"),
-                                     backgrounds=((a, 0.42),)))
+    events = session.observe(_belief(), MapUpdates(Transition(a, b, T, "cycle"),
+                                                   backgrounds=((a, 0.42),)))
     kinds = [e[0] for e in events]
     assert kinds == ["background_measured", "segments_joined", "transition_added"]
     assert session.known.neighbours(b)[a].mean.x == pytest.approx(-1.5)
@@ -85,9 +85,9 @@ def test_localisation_mode_changes_nothing_and_learns_nothing(tmp_path: Path) ->
     before = session.known
     session.mode = "localisation"
     decision = AcquisitionDecision(a, 0.5, 1.0, 0.5)
-    belief = _belief(closed_transition=Transition(a, b, T, "cycle"), backgrounds=((a, 0.4),),
-                     acquisition=decision)
-    assert session.observe(belief) == []
+    belief = _belief(acquisition=decision)
+    updates = MapUpdates(Transition(a, b, T, "cycle"), backgrounds=((a, 0.4),))
+    assert session.observe(belief, updates) == []
     assert session.known is before
     assert session.wants_place(belief, None, job_running=False) is None
     with pytest.raises(PlacecellError, match="read-only"):

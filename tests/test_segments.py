@@ -152,14 +152,14 @@ def test_driven_back_out_of_view_the_segments_are_joined_by_a_measured_transitio
         for belief in run.drive(5.0, 0.0, 0.0, 0.3):
             if belief.event is not None and belief.event.kind == "lost":
                 lost.append(belief.event.how)
-            if belief.closed_transition is not None:
-                closed.append(belief.closed_transition)
+            if run.updates.closed_transition is not None:
+                closed.append(run.updates.closed_transition)
         for _ in range(60):  # at rest near c until the estimate in c is reliable
             if closed:
                 break
-            belief = run.step()[1]
-            if belief.closed_transition is not None:
-                closed.append(belief.closed_transition)
+            run.step()
+            if run.updates.closed_transition is not None:
+                closed.append(run.updates.closed_transition)
         assert lost, "never lost on the way"
         c = next(p.id for p in run.mapper.graph.places if p.label == "c")
         assert [(t.from_id, t.to_id) for t in closed] == [(d.id, c)], closed

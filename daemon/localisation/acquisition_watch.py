@@ -234,7 +234,7 @@ class AcquisitionWatch:
                 self._meters.remove(meter)
                 continue
             value = meter.observe(self._matcher.lrp(prepared, place.templates), odo)
-            if value is not None:  # the map's owner stores it (Belief.backgrounds)
+            if value is not None:  # the map's owner stores it (MapUpdates.backgrounds)
                 self._meters.remove(meter)
                 done.append((meter.place_id, value))
         return tuple(done)

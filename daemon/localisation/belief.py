@@ -1,4 +1,6 @@
-"""What the localiser believes after a frame (published as ``pose`` and ``belief``)."""
+"""What the localiser believes after a frame (published as ``pose`` and ``belief``), and
+beside it what the frame found that changes the map (``MapUpdates``, for its owner, the
+service's MappingSession)."""
 
 from __future__ import annotations
 
@@ -62,13 +64,20 @@ class Belief:
     motion_since_last: tuple[float, float, float] | None = None
     scores: tuple[PlaceScore, ...] = ()  # places recognised in this frame (not every frame)
     switched_from: int | None = None  # the estimate moved into place_id from this place
-    closed_transition: Transition | None = None  # a cycle closed in this frame (§7.1.3)
     timings_ms: dict[str, float] = field(default_factory=dict)
     recent_place: int | None = None  # the place autonomous acquisition watches...
     recent_place_lrp: float | None = None  # ...its LRP in this frame
     acquisition: AcquisitionDecision | None = None  # learn a new place here (design §6)
-    backgrounds: tuple[tuple[int, float], ...] = ()  # (place, background LRP) measured now
     event: LocalisationEvent | None = None  # a loss or a relocalisation in this frame
     disambiguation: Disambiguation | None = None  # look-alikes told apart in this frame
-    floor_learned: FloorModel | None = None  # the floor learned from this frame (design §4)
     odometry: Odometry | None = None  # the base's odometry at the frame's stamp
+
+
+@dataclass(frozen=True)
+class MapUpdates:
+    """What a frame found that changes the map (design §6): the localiser only reads the
+    map; its owner stores these (daemon/service/mapping_session.py)."""
+
+    closed_transition: Transition | None = None  # a cycle closed in this frame (§7.1.3)
+    backgrounds: tuple[tuple[int, float], ...] = ()  # (place, background LRP) measured now
+    floor_learned: FloorModel | None = None  # the floor learned from this frame (design §4)

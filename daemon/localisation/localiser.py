@@ -38,6 +38,7 @@ from daemon.localisation.belief import (
     BeliefState,
     Disambiguation,
     LocalisationEvent,
+    MapUpdates,
     PlaceScore,
 )
 from daemon.localisation.global_localisation import PlaceSearch
@@ -268,7 +269,8 @@ class Localiser:
         confidence as for closing a cycle), else None. Safe to call from another thread."""
         tracker = self.tracker
         if tracker is None or tracker.estimate is None or self.mode != "track":
-            return None  # not while lost or before a relocalisation is confirmed
+            return None  # not while lost, before a relocalisation is confirmed, or while
+            # the sensor output is low (a robot carried off keeps a tight covariance)
         est = tracker.estimate
         if not reliable(est.covariance, tracker.confidence, self.settings):
             return None
@@ -288,7 +290,9 @@ class Localiser:
                 chain.add(sample)
 
     # ------------------------------------------------------------------ per frame
-    def process_frame(self, frame: Frame) -> Belief:
+    def process_frame(self, frame: Frame) -> tuple[Belief, MapUpdates]:
+        """One frame: what the localiser believes, and what the frame found that changes
+        the map (its owner stores that; this class only reads the map)."""
         t0 = time.perf_counter()  # timing only; never used by the method
         self.map = self._holder.current  # one map for the whole frame
         self.panorama = self.unwarper.unwarp(frame.image)
@@ -361,9 +365,10 @@ class Localiser:
             switched_from = self._move_to(revisited.place_id, grey, odo)
         timings["acquisition"] = (time.perf_counter() - t3) * 1e3
         timings["total"] = (time.perf_counter() - t0) * 1e3
-        return self._belief(frame.stamp_ns, odo, motion, local, scores,
-                            switched_from, closed, recent, recent_lrp, decision, background,
-                            {k: round(v, 3) for k, v in timings.items()}, event)
+        belief = self._belief(frame.stamp_ns, odo, motion, local, scores, switched_from,
+                              recent, recent_lrp, decision,
+                              {k: round(v, 3) for k, v in timings.items()}, event)
+        return belief, MapUpdates(closed, background, self._floor_learned)
 
     def recognise(self, frame: Frame, place_ids: list[int], estimated: bool = False
                   ) -> tuple[PlaceScore, ...]:
@@ -623,25 +628,22 @@ class Localiser:
         est = local.estimate
         closed = self._closure.observe(UncertainSE2(SE2.of(est.pose), est.covariance),
                                        local.confidence)
-        if closed is not None:  # the map's owner stores it (Belief.closed_transition)
+        if closed is not None:  # the map's owner stores it (MapUpdates.closed_transition)
             self._closure = None
         return closed
 
     def _belief(self, stamp_ns: int, odometry: Odometry | None,
                 motion: tuple[float, float, float] | None, local: LocalResult | None,
                 scores: tuple[PlaceScore, ...], switched_from: int | None,
-                closed: Transition | None, recent: int | None, recent_lrp: float | None,
-                decision: AcquisitionDecision | None,
-                background: tuple[tuple[int, float], ...], timings: dict[str, float],
+                recent: int | None, recent_lrp: float | None,
+                decision: AcquisitionDecision | None, timings: dict[str, float],
                 event: LocalisationEvent | None) -> Belief:
         odometry_ok = odometry is not None
         common = dict(stamp_ns=stamp_ns, odometry_ok=odometry_ok, odometry=odometry,
                       motion_since_last=motion,
                       scores=scores, timings_ms=timings, recent_place=recent,
                       recent_place_lrp=recent_lrp, acquisition=decision,
-                      backgrounds=background, switched_from=switched_from,
-                      closed_transition=closed, disambiguation=self._told_apart,
-                      floor_learned=self._floor_learned)
+                      switched_from=switched_from, disambiguation=self._told_apart)
         no_odometry = "" if odometry_ok else \
             "; no odometry at this frame (base silent): motion unknown"
         tracker = self.tracker

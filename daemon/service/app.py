@@ -9,21 +9,19 @@ from __future__ import annotations
 import json
 import logging
 import math
-import platform
 import signal
 import sqlite3
 import threading
 import time
 from typing import Any
 
-import cv2
 import numpy as np
 import zenoh
 
-import daemon
 from daemon.config import PlacecellConfig
+from daemon.localisation.belief import MapUpdates
 from daemon.localisation.localiser import Belief, Localiser
-from daemon.service import access, api, queries, wire, zenoh_link
+from daemon.service import access, api, queries, status, wire, zenoh_link
 from daemon.service.components import (
     LatestFrame,
     OdometryInbox,
@@ -32,7 +30,6 @@ from daemon.service.components import (
     camera_component,
 )
 from daemon.service.foxglove_view import FoxgloveView
-from daemon.service.health import processing_state
 from daemon.service.learn_job import (
     BaseCommands,
     FrameFeed,
@@ -48,7 +45,7 @@ from daemon.service.mapping_session import Event, MappingSession
 from daemon.service.notify import Notifier
 from daemon.service.pipeline import make_localiser, resume
 from daemon.service.ros2 import Ros2PosePublisher
-from daemon.service.supervisor import Supervisor, describe
+from daemon.service.supervisor import Supervisor
 from daemon.store.sqlite_store import SavedPose
 from daemon.vision.unwarp import Unwarper
 from hal.registry import HalContext, create_base, create_camera
@@ -72,7 +69,6 @@ class Daemon:
         self._session: zenoh.Session | None = None
         self._publishers: dict[str, Any] = {}
         self._ros2: Ros2PosePublisher | None = None
-        self._map_odom: SE2 | None = None  # the last map -> odom published (ROS 2)
         self._access: access.AccessWatch | None = None
         self._link_listener: Any = None
         self._view: FoxgloveView | None = None
@@ -532,34 +528,24 @@ class Daemon:
             log.warning("live view: %s", e)
 
     def _publish_ros2(self, belief: Belief, place: SE2, in_map: SE2) -> None:
-        """The tracked pose in the ``map`` frame for ROS 2 (design §11): its covariance
-        turned by the place's heading in the map, the stamp on the UNIX clock."""
+        """The tracked pose for ROS 2 (daemon/service/ros2.py), stamped on the UNIX clock."""
         assert self._ros2 is not None and belief.covariance is not None
-        c, s = math.cos(place.yaw), math.sin(place.yaw)
-        R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        covariance = R @ np.array(belief.covariance).reshape(3, 3) @ R.T
-        epoch_ns = belief.stamp_ns + time.time_ns() - time.monotonic_ns()
-        settings = self.config.ros2
+        odo = belief.odometry
         try:
-            self._ros2.publish(in_map, covariance, epoch_ns)
-            odo = belief.odometry
-            if odo is not None:  # map -> odom = map -> base ∘ (odom -> base)⁻¹, as AMCL
-                odom_base = SE2(odo.x, odo.y, odo.yaw)
-                self._map_odom = in_map.compose(odom_base.inverse())
-                self._ros2.publish_tf(self._map_odom, epoch_ns,
-                                      odom_base if settings.odom_tf else None)
+            self._ros2.publish_tracked(
+                in_map, place, np.array(belief.covariance).reshape(3, 3),
+                belief.stamp_ns + time.time_ns() - time.monotonic_ns(),
+                None if odo is None else SE2(odo.x, odo.y, odo.yaw))
         except Exception as e:  # noqa: BLE001 - zenoh shutting down
             log.debug("publish ROS 2 pose failed: %s", e)
 
     def _resend_map_odom(self) -> None:
-        """map -> odom again, post-dated from now, while tracking (between frames: a
-        slow frame must not let nav2's transform go stale)."""
+        """map -> odom again while tracking (Ros2PosePublisher.resend_map_odom)."""
         belief = self._belief
-        if self._ros2 is None or self._map_odom is None or belief is None \
-                or belief.state != "tracking":
+        if self._ros2 is None or belief is None or belief.state != "tracking":
             return
         try:
-            self._ros2.publish_tf(self._map_odom, time.time_ns())
+            self._ros2.resend_map_odom()
         except Exception as e:  # noqa: BLE001 - zenoh shutting down
             log.debug("publish map -> odom failed: %s", e)
 
@@ -568,7 +554,7 @@ class Daemon:
         log.info("event %s", json.dumps(body))
         self.publish("events", zenoh_link.encode("placecell.event", body))
 
-    def _on_belief(self, belief: Belief) -> None:
+    def _on_belief(self, belief: Belief, updates: MapUpdates) -> None:
         self._belief = belief
         self._belief_received_ns = time.monotonic_ns()
         if belief.state == "tracking" and belief.place_id is not None \
@@ -590,7 +576,7 @@ class Daemon:
             self._publish_ros2(belief, place, in_map)
         self.publish("belief", zenoh_link.encode("placecell.belief", body))
         try:  # what the frame does to the map, through its one owner (design §6)
-            self._publish_events(self.session.observe(belief))
+            self._publish_events(self.session.observe(belief, updates))
         except PlacecellError as e:  # the map file refused: say so, keep localising
             log.error("the map was not changed: %s", e)
         event = belief.event
@@ -615,16 +601,11 @@ class Daemon:
 
     # ------------------------------------------------------------------ status
     def status(self) -> dict[str, Any]:
+        """The ``status`` answer (daemon/service/status.py)."""
         now = time.monotonic_ns()
         health = self.supervisor.health
-        belief = self._belief
-        components = describe(health, now)
-        rates = {"frames_hz": round(health["camera"].rate.rate_hz(now), 2),
-                 "odometry_hz": round(health["base"].rate.rate_hz(now), 2),
-                 "processed_hz": round(health["processing"].rate.rate_hz(now), 2)}
-        components["processing"]["state"] = processing_state(
-            health["processing"].state, rates["processed_hz"], rates["frames_hz"],
-            self.config.service.min_processed_share)
+        components, rates = status.components_and_rates(
+            health, now, self.config.service.min_processed_share)
         return {
             "robot": self.robot,
             "stamp_ns": now,
@@ -632,50 +613,18 @@ class Daemon:
             "healthy": all(c["state"] == "running" for c in components.values()),
             "components": components,
             "rates": rates,
-            "belief": self._belief_summary(belief, now),
+            "belief": status.belief_summary(self._belief, now - self._belief_received_ns,
+                                            self.config.service.stale_after_s, health),
             "map": {"path": self.config.map.path, "places": self.mapper.place_count(),
                     "transitions": self.mapper.transition_count(),
                     "segments": len(set(self.mapper.segment_of.values())),
                     "mode": self.mode, "writable": not self.map.readonly,
                     "readonly_reason": self.map_readonly_reason},
-            "job": self._job_summary(),
+            "job": status.job_summary(self._job),
             "access": (self._access.summary() if self._access is not None
                        else access.disabled_summary()),
-            "versions": {
-                "placecell": daemon.__version__,
-                "python": platform.python_version(),
-                "zenoh": _zenoh_version(),
-                "opencv": cv2.__version__,
-                "numpy": np.__version__,
-            },
+            "versions": status.versions(),
         }
-
-    def _job_summary(self) -> dict[str, Any] | None:
-        job = self._job
-        return None if job is None else {
-            "kind": job.kind, "phase": job.progress.phase,
-            "fraction": round(job.progress.fraction, 3), "started_by": job.started_by,
-            "label": job.label}
-
-    def _belief_summary(self, belief: Belief | None, now_ns: int) -> dict[str, Any]:
-        """The belief as status reports it: honest about missing sensors (docs/design.md §11)."""
-        health = self.supervisor.health
-        stale_ns = self.config.service.stale_after_s * 1e9
-        frames_ok = (health["camera"].state == "running" and belief is not None
-                     and now_ns - self._belief_received_ns < stale_ns)
-        odometry_ok = health["base"].state == "running"
-        state = "uninitialised" if belief is None else belief.state
-        reasons = [] if belief is None else [belief.reason]
-        if not frames_ok:
-            reasons.insert(0, "no camera frames"
-                           + (f" ({health['camera'].last_error})"
-                              if health["camera"].last_error else ""))
-        if not odometry_ok:
-            reasons.insert(0, "no odometry: motion unknown"
-                           + (f" ({health['base'].last_error})"
-                              if health["base"].last_error else ""))
-        return {"state": state, "reason": "; ".join(reasons), "frames_ok": frames_ok,
-                "odometry_ok": odometry_ok}
 
     def status_payload(self) -> bytes:
         return zenoh_link.encode("placecell.status", self.status())
@@ -755,12 +704,3 @@ class Daemon:
         self.notifier.close()
         log.info("stopped")
         return 0
-
-
-def _zenoh_version() -> str:
-    try:
-        from importlib.metadata import version
-
-        return version("eclipse-zenoh")
-    except Exception:  # noqa: BLE001
-        return "unknown"

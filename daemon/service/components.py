@@ -9,6 +9,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+from daemon.localisation.belief import MapUpdates
 from daemon.localisation.localiser import Belief, Localiser
 from daemon.service.health import ComponentHealth
 from hal.base.base import Base
@@ -127,13 +128,15 @@ def base_component(make_base: Callable[[], Base], timeout_s: float,
 
 
 class ProcessingComponent:
-    """Feeds frames and odometry to the localiser and hands each belief on; every frame
+    """Feeds frames and odometry to the localiser and hands each belief on, with what the
+    frame found that changes the map (for the map's owner); every frame
     and every odometry sample also goes to the taps (the mapper, a running job)."""
 
     name = "processing"
 
     def __init__(self, make_localiser: Callable[[], Localiser], mailbox: LatestFrame,
-                 odometry_inbox: OdometryInbox, on_belief: Callable[[Belief], None],
+                 odometry_inbox: OdometryInbox,
+                 on_belief: Callable[[Belief, MapUpdates], None],
                  health: Callable[[], ComponentHealth],
                  odometry_taps: Sequence[Callable[[list[Odometry]], None]] = (),
                  frame_taps: Sequence[Callable[[Frame], None]] = ()) -> None:
@@ -159,11 +162,11 @@ class ProcessingComponent:
             self._await_odometry(frame.stamp_ns)
         for frame_tap in self._frame_taps:
             frame_tap(frame)
-        belief = self.localiser.process_frame(frame)
+        belief, updates = self.localiser.process_frame(frame)
         self._health().rate.tick()
         self._health().detail["timings_ms"] = belief.timings_ms
         self._health().detail["skipped_frames"] = self._mailbox.skipped
-        self._on_belief(belief)
+        self._on_belief(belief, updates)
 
     def _await_odometry(self, stamp_ns: int, timeout_s: float = 1.0) -> None:
         """Wait until odometry reaches the frame's stamp (or ``timeout_s`` passes: a base

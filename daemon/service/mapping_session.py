@@ -23,7 +23,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from daemon.localisation.belief import Belief
+from daemon.localisation.belief import Belief, MapUpdates
 from daemon.localisation.known_map import KnownMap
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.place import Place
@@ -101,29 +101,30 @@ class MappingSession:
         return self.mode == "mapping"
 
     # ------------------------------------------------------------ per frame
-    def observe(self, belief: Belief) -> list[Event]:
-        """What this frame's belief does to the map: the floor model learned, backgrounds
-        measured as the robot left places, a cycle closed (§7.1.3), the watched place's
-        background reached (design §6). Returns the events to publish."""
+    def observe(self, belief: Belief, updates: MapUpdates) -> list[Event]:
+        """What a frame does to the map (``updates``, found beside ``belief``): the floor
+        model learned, backgrounds measured as the robot left places, a cycle closed
+        (§7.1.3), the watched place's background reached (design §6). Returns the events
+        to publish."""
         if not self.mapping:
-            if belief.closed_transition is not None:
-                t = belief.closed_transition
+            if updates.closed_transition is not None:
+                t = updates.closed_transition
                 log.info("cycle %d -> %d measured; not stored in localisation mode",
                          t.from_id, t.to_id)
             return []
         events: list[Event] = []
         mapper = self.mapper
-        if belief.floor_learned is not None and mapper.graph.floor is None:
-            mapper.save_floor(belief.floor_learned)
+        if updates.floor_learned is not None and mapper.graph.floor is None:
+            mapper.save_floor(updates.floor_learned)
             log.info("floor model learned from the first colour frame and stored with the "
-                     "map (gradient threshold %.3f)", belief.floor_learned.gradient_threshold)
-        backgrounds = list(belief.backgrounds)
+                     "map (gradient threshold %.3f)", updates.floor_learned.gradient_threshold)
+        backgrounds = list(updates.backgrounds)
         if belief.acquisition is not None:
             backgrounds.append((belief.acquisition.place_id,
                                 belief.acquisition.background_lrp))
         for place_id, background in backgrounds:
             self._set_background(place_id, background)
-        for place_id, background in belief.backgrounds:
+        for place_id, background in updates.backgrounds:
             events.append(("background_measured", {"place": place_id,
                                                    "background_lrp": round(background, 4)}))
         decision = belief.acquisition
@@ -131,8 +132,8 @@ class MappingSession:
             events.append(("background_reached", {"place": decision.place_id,
                                                   "lrp": round(decision.lrp, 4),
                                                   "distance_m": round(decision.distance_m, 3)}))
-        if belief.closed_transition is not None:
-            events += self.add_cycle(belief.closed_transition)
+        if updates.closed_transition is not None:
+            events += self.add_cycle(updates.closed_transition)
         return events
 
     def _set_background(self, place_id: int, background: float) -> None:

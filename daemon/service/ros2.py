@@ -223,6 +223,28 @@ class Ros2PosePublisher:
                               TF_TYPE, TF_QOS_KEYEXPR) if settings.tf else None
         self._session, self._zid, self._node_id = session, zid, node_id
         self._subscribers: list[Any] = []
+        self.map_odom: SE2 | None = None  # the last map -> odom published
+
+    def publish_tracked(self, in_map: SE2, place: SE2, covariance_in_place: np.ndarray,
+                        stamp_ns: int, odometry: SE2 | None) -> None:
+        """A tracked pose (design §11): ``in_map`` with its covariance turned by the
+        place's heading in the map (``place``: the place's reference in the map frame);
+        ``stamp_ns`` the frame's time on the UNIX clock; ``odometry`` (odom -> base at that
+        time) gives map -> odom = (map -> base) ∘ (odom -> base)⁻¹, as AMCL publishes it."""
+        c, s = math.cos(place.yaw), math.sin(place.yaw)
+        R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        self.publish(in_map, R @ covariance_in_place @ R.T, stamp_ns)
+        if odometry is not None:
+            self.map_odom = in_map.compose(odometry.inverse())
+            self.publish_tf(self.map_odom, stamp_ns,
+                            odometry if self.settings.odom_tf else None)
+
+    def resend_map_odom(self) -> None:
+        """map -> odom again, post-dated from now (between frames: a slow frame must not
+        let nav2's transform go stale); nothing before the first tracked pose. The caller
+        calls it while tracking only."""
+        if self.map_odom is not None:
+            self.publish_tf(self.map_odom, time.time_ns())
 
     def on_initial_pose(self, handle: Callable[[SE2, np.ndarray, str], None]) -> None:
         """Subscribe to ``[ros2] initial_pose_topic`` (any publisher's type hash) and hand

@@ -108,7 +108,7 @@ def decision_ms(places: list[Place], poses: list[tuple[str, tuple[float, float, 
         spent, n, scored = 0.0, 0, 0
         while n < 100:  # frames of the same view until a place is chosen
             stamp += 100_000_000
-            belief = localiser.process_frame(Frame(raw, stamp, n))
+            belief, _ = localiser.process_frame(Frame(raw, stamp, n))
             spent, n, scored = spent + belief.timings_ms["search"], n + 1, scored + len(
                 belief.scores)
             if localiser.mode != "search":

@@ -105,8 +105,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         def frames(dx: float, dy: float) -> Iterator[Belief]:
             nonlocal switches
             for belief in r.drive(dx, dy, 0.0, args.speed):
-                if belief.closed_transition is not None:  # Run.step stored it
-                    closed.append(belief.closed_transition)
+                if r.updates.closed_transition is not None:  # Run.step stored it
+                    closed.append(r.updates.closed_transition)
                 switches += belief.switched_from is not None
                 yield belief
 

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from daemon.config import PlacecellConfig, load
-from daemon.localisation.belief import Belief
+from daemon.localisation.belief import Belief, MapUpdates
 from daemon.localisation.localiser import Localiser
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.place import Place
@@ -115,6 +115,7 @@ class Run:
         self.localiser = Localiser(cfg.mirror, cfg.panorama, settings=cfg.localisation,
                                    odometry_noise=cfg.odometry, known_map=self.session.holder)
         self.events: list[Event] = []  # what the map's owner said, as the daemon publishes
+        self.updates = MapUpdates()  # what the last frame found that changes the map
         self.sensors = DeviceSensors(self.camera, self.base, cfg.tbl,
                                      cfg.base.read_timeout_s, on_odometry=self._odometry)
         self.frame_filter = frame_filter
@@ -143,9 +144,9 @@ class Run:
         if self.frame_filter is not None:
             frame = dataclasses.replace(frame, image=self.frame_filter(frame.image))
         t0 = time.perf_counter()
-        belief = self.localiser.process_frame(frame)
+        belief, self.updates = self.localiser.process_frame(frame)
         self.process_s.append(time.perf_counter() - t0)
-        self.events += self.session.observe(belief)  # as the daemon does
+        self.events += self.session.observe(belief, self.updates)  # as the daemon does
         return frame, belief
 
     def drive(self, dx: float, dy: float, dyaw: float, speed: float) -> Iterator[Belief]:

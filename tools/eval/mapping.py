@@ -36,6 +36,7 @@ from typing import IO, Any
 import numpy as np
 
 from daemon.config import PlacecellConfig, load
+from daemon.localisation.belief import MapUpdates
 from daemon.localisation.known_map import KnownMap, MapHolder
 from daemon.localisation.localiser import Localiser
 from daemon.mapping.place import Place
@@ -204,10 +205,11 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
             pose = robot.true_pose()
             path_m += math.dist(pose[:2], last_pose[:2])
             last_pose = pose
-            belief = localiser.process_frame(frame)
+            belief, updates = localiser.process_frame(frame)
             if trace is not None:
-                trace.write(json.dumps(_traced_first(pose, path_m, belief, localiser)) + "\n")
-            session.observe(belief)  # as the daemon does with every belief
+                trace.write(json.dumps(_traced_first(pose, path_m, belief, updates,
+                                                     localiser)) + "\n")
+            session.observe(belief, updates)  # as the daemon does with every frame
             why = session.wants_place(belief, localiser.odometry.latest, job_running=False)
             if why is None or path_m < retry_at_m:
                 if belief.acquisition is not None:  # not now: acquisition asks again
@@ -246,7 +248,7 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
 
 
 def _traced_first(pose: tuple[float, float, float], path_m: float, belief: Any,
-                  localiser: Localiser) -> dict[str, Any]:
+                  updates: MapUpdates, localiser: Localiser) -> dict[str, Any]:
     """One first-pass frame: the true pose, what the acquisition made of it, and where
     the Localiser puts the robot."""
     assert localiser.watch is not None
@@ -263,7 +265,7 @@ def _traced_first(pose: tuple[float, float, float], path_m: float, belief: Any,
             "decision": None if decision is None else {
                 "place": decision.place_id, "background": r(decision.background_lrp),
                 "lrp": r(decision.lrp)},
-            "backgrounds": [[p, r(b)] for p, b in belief.backgrounds],
+            "backgrounds": [[p, r(b)] for p, b in updates.backgrounds],
             "state": belief.state, "place": belief.place_id,
             "pose_in_place": None if belief.pose_in_place is None else [
                 round(v, 3) for v in belief.pose_in_place]}

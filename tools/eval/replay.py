@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             k += 1
         localiser.add_odometry(odometry[start:k])
         t0 = time.perf_counter()
-        belief = localiser.process_frame(frame)
+        belief, _ = localiser.process_frame(frame)
         process_s.append(time.perf_counter() - t0)
         switches += belief.switched_from is not None
         out.append(pose_record(frame.stamp_ns, belief))
