@@ -20,12 +20,9 @@ from hal.registry import BASE_BACKENDS, CAMERA_BACKENDS
 from hal.sim.settings import SimSettings
 from kernel.errors import ConfigError
 from kernel.sensor_settings import MirrorSettings, PanoramaSettings
-from kernel.settings import as_dict, build, read_toml, setting
+from kernel.settings import ROS2_TOPIC, as_dict, build, read_toml, setting
 
 _ROBOT_NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
-# ROS 2 topic names: slash-separated tokens of letters, digits and '_', none starting with
-# a digit (the part of rcl's validation that needs no substitution).
-_TOPIC = re.compile(r"^/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*$")
 _ZID = re.compile(r"^[1-9a-f][0-9a-f]{0,31}$")  # zenoh's: hex, no leading zero
 _FRAME_ID = re.compile(r"^[A-Za-z_][A-Za-z0-9_/]{0,63}$")
 
@@ -84,7 +81,7 @@ class Ros2Settings:
 
     def __post_init__(self) -> None:
         for name in ("topic", "initial_pose_topic"):
-            if not _TOPIC.match(getattr(self, name)):
+            if not ROS2_TOPIC.match(getattr(self, name)):
                 raise ValueError(f"ros2.{name} {getattr(self, name)!r} is not a ROS 2 topic "
                                  "name (e.g. /placecell/pose: letters, digits, '_' between "
                                  "slashes)")

@@ -18,6 +18,7 @@ CAMERA_BACKENDS: dict[str, str] = {
     "replay": "hal.camera.replay:ReplayCamera",
     "v4l2": "hal.camera.v4l2:V4L2Camera",
     "libcamera": "hal.camera.libcamera:LibcameraCamera",
+    "ros2": "hal.camera.ros2:Ros2Camera",
 }
 
 BASE_BACKENDS: dict[str, str] = {
@@ -25,6 +26,7 @@ BASE_BACKENDS: dict[str, str] = {
     "replay": "hal.base.replay:ReplayBase",
     "xr4000-serial": "hal.base.xr4000_serial:Xr4000SerialBase",
     "xr4000-can": "hal.base.xr4000_can:Xr4000CanBase",
+    "ros2": "hal.base.ros2:Ros2Base",
 }
 
 # Which pip package provides the import a backend needs, for the error message.

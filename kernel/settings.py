@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import tomllib
 import types
 import typing
@@ -23,6 +24,10 @@ T = TypeVar("T")
 
 # Integers a setting or request may hold: what SQLite and numpy's int64 keep.
 MAX_INT = 2**63 - 1
+
+# ROS 2 topic names: slash-separated tokens of letters, digits and '_', none starting with
+# a digit (the part of rcl's validation that needs no substitution).
+ROS2_TOPIC = re.compile(r"^/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*$")
 
 _MISSING = dataclasses.MISSING
 

@@ -4,18 +4,8 @@ A ROS 2 system running rmw_zenoh (Humble, Jazzy) sees placecell as a node ``plac
 with one publisher of ``geometry_msgs/msg/PoseWithCovarianceStamped`` on ``[ros2] topic``:
 ``ros2 topic echo /placecell/pose`` needs no bridge and no ROS install on our side.
 
-What rmw_zenoh expects, and what this module makes:
-
-- the topic key ``<domain>/<topic without leading slash>/<mangled type>/<type hash>``;
-- the payload in CDR (XCDR1, little endian), written by ``rosbags`` (a well-kept
-  serialiser; the message definitions are Jazzy's, whose hash equals Humble's here);
-- a 33-byte attachment on every sample: the sequence number and the source timestamp
-  (int64, ns since the UNIX epoch), then the publisher's 16-byte GID, in zenoh-ext's
-  serialisation (a length byte before the GID) — subscribers drop samples without it;
-- liveliness tokens for the node (``NN``) and the publisher (``MP``) under
-  ``@ros2_lv/<domain>/...``, which is how the ROS graph (``ros2 node list``, ``ros2 topic
-  list``) discovers them. The GID is XXH3-128 of the publisher's token, as rmw_zenoh
-  computes it.
+The keys, CDR payloads, attachments and liveliness tokens are rmw_zenoh's, made by
+hal/ros2_wire.py (shared with the ROS 2 camera and base backends).
 
 The pose is in the ``map`` frame (design §6); the 6x6 covariance is the 3x3 of (x, y, yaw)
 placed at rows/columns (0, 1, 5), the others 0 as nav2's AMCL publishes them.
@@ -38,12 +28,11 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-import xxhash
 import zenoh
 import zenoh.ext
-from rosbags.typesys import Stores, get_typestore
 
 from daemon.config import Ros2Settings
+from hal import ros2_wire as wire
 from kernel.se2 import SE2
 
 MSG_TYPE = "geometry_msgs/msg/PoseWithCovarianceStamped"
@@ -54,54 +43,40 @@ MANGLED_TYPE = "geometry_msgs::msg::dds_::PoseWithCovarianceStamped_"
 # REP-2011 type hash (RIHS01) of the message definition; Humble and Jazzy alike.
 TYPE_HASH = "RIHS01_26432f9803e43727d3c8f668d1fdb3c630f548af631e2f4e31382371bfea3b6e"
 NODE_NAME = "placecell"
-# QoS as rmw_zenoh writes it in a token, fields equal to its defaults left empty:
-# reliable, volatile, keep-last 10 (rclcpp's default depth; rmw_zenoh's own is 42).
-QOS_KEYEXPR = "::,10:,:,:,,"
+QOS_KEYEXPR = wire.QOS_KEYEXPR
 TF_QOS_KEYEXPR = "::,100:,:,:,,"  # tf2's publisher depth
-GID_LENGTH = 16
+GID_LENGTH = wire.GID_LENGTH
 
-_TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+_TYPESTORE = wire.TYPESTORE
 log = logging.getLogger(__name__)
 
-
-def mangle(name: str) -> str:
-    """rmw_zenoh's mangling of names inside key expressions: '/' becomes '%'; an empty
-    namespace or enclave ('/' or '') is '%'."""
-    return name.replace("/", "%") if name else "%"
-
-
-def mangled_type(msg_type: str) -> str:
-    """rmw_zenoh's name of a message type: <package>::msg::dds_::<Type>_."""
-    package, kind, name = msg_type.split("/")
-    return f"{package}::{kind}::dds_::{name}_"
+# The rmw_zenoh names and wire helpers (hal/ros2_wire.py), with this node's defaults.
+mangle, mangled_type, gid, attachment = wire.mangle, wire.mangled_type, wire.gid, \
+    wire.attachment
 
 
 def type_hash(msg_type: str) -> str:
-    """The REP-2011 type hash (RIHS01) of a message definition, as rosbags computes it."""
-    return TYPE_HASH if msg_type == MSG_TYPE else str(_TYPESTORE.hash_rihs01(msg_type))
+    return wire.type_hash(msg_type)
 
 
 def topic_key(domain_id: int, topic: str, msg_type: str = MSG_TYPE) -> str:
-    return f"{domain_id}/{topic.strip('/')}/{mangled_type(msg_type)}/{type_hash(msg_type)}"
+    return wire.topic_key(domain_id, topic, msg_type)
 
 
 def node_token(domain_id: int, zid: str, node_id: int) -> str:
-    return (f"@ros2_lv/{domain_id}/{zid}/{node_id}/{node_id}/NN/{mangle('/')}/"
-            f"{mangle('/')}/{NODE_NAME}")
+    return wire.node_token(domain_id, zid, node_id, NODE_NAME)
 
 
 def publisher_token(domain_id: int, zid: str, node_id: int, entity_id: int,
                     topic: str, msg_type: str = MSG_TYPE, qos: str = QOS_KEYEXPR) -> str:
-    topic = topic if topic.startswith("/") else "/" + topic
-    return (f"@ros2_lv/{domain_id}/{zid}/{node_id}/{entity_id}/MP/{mangle('/')}/"
-            f"{mangle('/')}/{NODE_NAME}/{mangle(topic)}/{mangled_type(msg_type)}/"
-            f"{type_hash(msg_type)}/{qos}")
+    return wire.entity_token("MP", domain_id, zid, node_id, entity_id, NODE_NAME, topic,
+                             msg_type, qos)
 
 
 def subscription_token(domain_id: int, zid: str, node_id: int, entity_id: int,
                        topic: str, msg_type: str = MSG_TYPE, qos: str = QOS_KEYEXPR) -> str:
-    return publisher_token(domain_id, zid, node_id, entity_id, topic, msg_type, qos
-                           ).replace(f"/{entity_id}/MP/", f"/{entity_id}/MS/", 1)
+    return wire.entity_token("MS", domain_id, zid, node_id, entity_id, NODE_NAME, topic,
+                             msg_type, qos)
 
 
 def decode_pose(payload: bytes) -> tuple[SE2, np.ndarray, str]:
@@ -112,8 +87,8 @@ def decode_pose(payload: bytes) -> tuple[SE2, np.ndarray, str]:
         msg: Any = _TYPESTORE.deserialize_cdr(payload, MSG_TYPE)
     except Exception as e:  # noqa: BLE001 - rosbags raises several kinds on bad bytes
         raise ValueError(f"not a {MSG_TYPE}: {e}") from e
-    p, q = msg.pose.pose.position, msg.pose.pose.orientation
-    yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+    p = msg.pose.pose.position
+    yaw = wire.yaw_of(msg.pose.pose.orientation)
     full = np.asarray(msg.pose.covariance, dtype=np.float64).reshape(6, 6)
     idx = np.array([0, 1, 5])
     values = (p.x, p.y, yaw, *full[np.ix_(idx, idx)].ravel())
@@ -123,29 +98,7 @@ def decode_pose(payload: bytes) -> tuple[SE2, np.ndarray, str]:
         str(msg.header.frame_id)
 
 
-def gid(token: str) -> bytes:
-    """The entity's GID as rmw_zenoh derives it: XXH3-128 of its liveliness key, the low
-    64 bits first, each little endian."""
-    return xxhash.xxh3_128(token.encode()).intdigest().to_bytes(GID_LENGTH, "little")
-
-
-def attachment(sequence: int, stamp_ns: int, publisher_gid: bytes) -> bytes:
-    """The per-sample attachment: int64 sequence number, int64 source timestamp, the GID
-    (zenoh-ext serialisation, as rmw_zenoh's AttachmentData writes it)."""
-    out: bytes = zenoh.ext.z_serialize((zenoh.ext.Int64(sequence), zenoh.ext.Int64(stamp_ns),
-                                        publisher_gid)).to_bytes()
-    return out
-
-
-def _time(stamp_ns: int) -> Any:
-    return _TYPESTORE.types["builtin_interfaces/msg/Time"](sec=stamp_ns // 1_000_000_000,
-                                                          nanosec=stamp_ns % 1_000_000_000)
-
-
-def _quaternion(yaw: float) -> Any:
-    """A rotation about z by ``yaw`` (rad)."""
-    return _TYPESTORE.types["geometry_msgs/msg/Quaternion"](
-        x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
+_time, _quaternion = wire.ros_time, wire.quaternion
 
 
 def pose_cdr(pose: SE2, covariance: np.ndarray, stamp_ns: int, frame_id: str) -> bytes:
@@ -181,29 +134,6 @@ def tf_cdr(transforms: list[tuple[str, str, SE2, int]]) -> bytes:
     return bytes(_TYPESTORE.serialize_cdr(t[TF_TYPE](transforms=stamped), TF_TYPE))
 
 
-class _Publisher:
-    """One rmw_zenoh publisher: its key, liveliness token, GID and sequence."""
-
-    def __init__(self, session: zenoh.Session, domain_id: int, zid: str, node_id: int,
-                 entity_id: int, topic: str, msg_type: str, qos: str) -> None:
-        self.key = topic_key(domain_id, topic, msg_type)
-        self.token_key = publisher_token(domain_id, zid, node_id, entity_id, topic, msg_type,
-                                         qos)
-        self.gid = gid(self.token_key)
-        self._sequence = 0
-        self._publisher = session.declare_publisher(self.key)
-        self._token = session.liveliness().declare_token(self.token_key)
-
-    def put(self, payload: bytes) -> None:
-        self._sequence += 1
-        self._publisher.put(payload,
-                            attachment=attachment(self._sequence, time.time_ns(), self.gid))
-
-    def close(self) -> None:
-        self._token.undeclare()
-        self._publisher.undeclare()
-
-
 class Ros2PosePublisher:
     """One ROS 2 node on the daemon's zenoh session: the pose publisher and, with
     ``[ros2] tf``, a publisher on /tf (map -> odom, and odom -> base_link with
@@ -215,12 +145,12 @@ class Ros2PosePublisher:
         node_id = 0  # the first entities of the session's ROS context
         self.node_token_key = node_token(settings.domain_id, zid, node_id)
         self._node_token = session.liveliness().declare_token(self.node_token_key)
-        self._pose = _Publisher(session, settings.domain_id, zid, node_id, 1, settings.topic,
-                                MSG_TYPE, QOS_KEYEXPR)
+        self._pose = wire.Publisher(session, settings.domain_id, node_id, 1, NODE_NAME,
+                                    settings.topic, MSG_TYPE, QOS_KEYEXPR)
         self.key, self.publisher_token_key = self._pose.key, self._pose.token_key
         self.gid = self._pose.gid
-        self._tf = _Publisher(session, settings.domain_id, zid, node_id, 2, TF_TOPIC,
-                              TF_TYPE, TF_QOS_KEYEXPR) if settings.tf else None
+        self._tf = wire.Publisher(session, settings.domain_id, node_id, 2, NODE_NAME,
+                                  TF_TOPIC, TF_TYPE, TF_QOS_KEYEXPR) if settings.tf else None
         self._session, self._zid, self._node_id = session, zid, node_id
         self._subscribers: list[Any] = []
         self.map_odom: SE2 | None = None  # the last map -> odom published

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-from kernel.settings import setting
+from kernel.settings import ROS2_TOPIC, setting
 
 
 @dataclass(frozen=True)
@@ -76,10 +76,46 @@ class Xr4000CanSettings:
 
 
 @dataclass(frozen=True)
+class Ros2BaseSettings:
+    """A ROS 2 robot's base over rmw_zenoh (hal/base/ros2.py)."""
+
+    odom_topic: str = setting("/odom", doc="nav_msgs/Odometry from the base driver")
+    cmd_vel_topic: str = setting("/cmd_vel", doc="geometry_msgs/Twist to the base driver")
+    domain_id: int = setting(0, ge=0, le=232, doc="ROS_DOMAIN_ID")
+    connect: list[str] = setting(["tcp/127.0.0.1:7447"], doc="zenoh endpoints to connect to "
+                                 "(the ROS system's zenoh router: rmw_zenoh's default)")
+    kinematics: Literal["holonomic", "differential"] = setting(
+        "differential", doc="differential: along the heading or turning in place only")
+    can_move: bool = setting(True, doc="whether motion commands are sent")
+    max_speed_m_s: float = setting(0.3, gt=0.0, le=3.0, doc="moves are driven at most this fast")
+    max_yaw_rate_rad_s: float = setting(0.8, gt=0.0, le=10.0, doc="and turn at most this fast")
+    slow_down_m: float = setting(0.15, gt=0.0, le=5.0, doc="slowing down over the last metres")
+    slow_down_rad: float = setting(0.3, gt=0.0, le=3.2, doc="...and the last radians of a move")
+    position_tolerance_m: float = setting(0.01, gt=0.0, le=1.0, doc="a move is done this near")
+    yaw_tolerance_rad: float = setting(0.02, gt=0.0, le=1.0, doc="...and turned this near")
+    control_rate_hz: float = setting(20.0, gt=0.0, le=200.0, doc="velocity commands per second "
+                                     "while a move is under way")
+    odometry_timeout_s: float = setting(0.5, gt=0.0, le=10.0, doc="watchdog: no odometry this "
+                                        "long while moving stops the robot")
+    command_timeout_s: float = setting(0.5, gt=0.0, le=10.0, doc="watchdog: a velocity not "
+                                       "repeated within this stops the robot")
+
+    def __post_init__(self) -> None:
+        for name in ("odom_topic", "cmd_vel_topic"):
+            if not ROS2_TOPIC.match(getattr(self, name)):
+                raise ValueError(f"base.ros2.{name} {getattr(self, name)!r} is not a ROS 2 "
+                                 "topic name (letters, digits, '_' between slashes)")
+        if not self.connect:
+            raise ValueError("base.ros2.connect is empty: give the ROS system's zenoh "
+                             "router, e.g. tcp/127.0.0.1:7447")
+
+
+@dataclass(frozen=True)
 class BaseSettings:
-    backend: str = setting("sim", doc="sim | replay | xr4000-serial | xr4000-can")
+    backend: str = setting("sim", doc="sim | replay | xr4000-serial | xr4000-can | ros2")
     read_timeout_s: float = setting(0.5, gt=0.0, le=60.0)
     sim: SimBaseSettings = setting(default_factory=SimBaseSettings)
     replay: ReplayBaseSettings = setting(default_factory=ReplayBaseSettings)
     xr4000_serial: Xr4000SerialSettings = setting(default_factory=Xr4000SerialSettings)
     xr4000_can: Xr4000CanSettings = setting(default_factory=Xr4000CanSettings)
+    ros2: Ros2BaseSettings = setting(default_factory=Ros2BaseSettings)

@@ -1,1 +1,1 @@
-"""Camera backends: sim, replay (MCAP), v4l2, libcamera."""
+"""Camera backends: sim, replay (MCAP), v4l2, libcamera, ros2 (rmw_zenoh)."""

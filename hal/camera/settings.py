@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-from kernel.settings import setting
+from kernel.settings import ROS2_TOPIC, setting
 
 
 @dataclass(frozen=True)
@@ -43,11 +43,30 @@ class ReplayCameraSettings:
 
 
 @dataclass(frozen=True)
+class Ros2CameraSettings:
+    """Images from a ROS 2 topic over rmw_zenoh (hal/camera/ros2.py)."""
+
+    topic: str = setting("/camera/image_raw", doc="sensor_msgs/Image or CompressedImage topic")
+    domain_id: int = setting(0, ge=0, le=232, doc="ROS_DOMAIN_ID")
+    connect: list[str] = setting(["tcp/127.0.0.1:7447"], doc="zenoh endpoints to connect to "
+                                 "(the ROS system's zenoh router: rmw_zenoh's default)")
+
+    def __post_init__(self) -> None:
+        if not ROS2_TOPIC.match(self.topic):
+            raise ValueError(f"camera.ros2.topic {self.topic!r} is not a ROS 2 topic name "
+                             "(e.g. /camera/image_raw: letters, digits, '_' between slashes)")
+        if not self.connect:
+            raise ValueError("camera.ros2.connect is empty: give the ROS system's zenoh "
+                             "router, e.g. tcp/127.0.0.1:7447")
+
+
+@dataclass(frozen=True)
 class CameraSettings:
-    backend: str = setting("sim", doc="sim | replay | v4l2 | libcamera")
+    backend: str = setting("sim", doc="sim | replay | v4l2 | libcamera | ros2")
     read_timeout_s: float = setting(0.5, gt=0.0, le=60.0, doc="a read longer than this is a stall")
     sim: SimCameraSettings = setting(default_factory=SimCameraSettings)
     v4l2: V4L2Settings = setting(default_factory=V4L2Settings)
     libcamera: LibcameraSettings = setting(default_factory=LibcameraSettings)
     replay: ReplayCameraSettings = setting(default_factory=ReplayCameraSettings)
+    ros2: Ros2CameraSettings = setting(default_factory=Ros2CameraSettings)
     encoding: Literal["bgr", "grey"] = setting("bgr", doc="colour layout handed to the daemon")

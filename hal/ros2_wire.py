@@ -1,0 +1,134 @@
+"""ROS 2 as rmw_zenoh puts it on the wire, for the ROS 2 backends (hal/camera/ros2.py,
+hal/base/ros2.py) and the daemon's ROS 2 node (daemon/service/ros2.py); no ROS install.
+
+What rmw_zenoh (Humble, Jazzy) expects (docs/design.md §11):
+
+- a topic's data key ``<domain>/<topic without leading slash>/<mangled type>/<type hash>``,
+  the mangled type ``<package>::msg::dds_::<Type>_``, the hash REP-2011's RIHS01 of the
+  definition (``rosbags`` computes it; Jazzy's definitions, whose hashes equal Humble's
+  for the messages used here);
+- payloads in CDR (XCDR1, little endian), written and read by ``rosbags``;
+- a 33-byte attachment on every sample: the sequence number and the source timestamp
+  (int64, ns since the UNIX epoch), then the publisher's 16-byte GID, in zenoh-ext's
+  serialisation — subscribers drop samples without it;
+- liveliness tokens for a node (``NN``), its publishers (``MP``) and subscriptions
+  (``MS``) under ``@ros2_lv/<domain>/...``, '/' inside a field written '%'; that is how
+  the ROS graph (``ros2 node list``, ``ros2 topic info``) discovers them. The GID is
+  XXH3-128 of the entity's token.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import xxhash
+import zenoh
+import zenoh.ext
+from rosbags.typesys import Stores, get_typestore
+
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+# QoS as rmw_zenoh writes it in a token, fields equal to its defaults left empty:
+# reliable, volatile, keep-last 10 (rclcpp's default depth; rmw_zenoh's own is 42).
+QOS_KEYEXPR = "::,10:,:,:,,"
+GID_LENGTH = 16
+
+
+def mangle(name: str) -> str:
+    """rmw_zenoh's mangling of names inside key expressions: '/' becomes '%'; an empty
+    namespace or enclave ('/' or '') is '%'."""
+    return name.replace("/", "%") if name else "%"
+
+
+def mangled_type(msg_type: str) -> str:
+    """rmw_zenoh's name of a message type: <package>::msg::dds_::<Type>_."""
+    package, kind, name = msg_type.split("/")
+    return f"{package}::{kind}::dds_::{name}_"
+
+
+def type_hash(msg_type: str) -> str:
+    """The REP-2011 type hash (RIHS01) of a message definition."""
+    return str(TYPESTORE.hash_rihs01(msg_type))
+
+
+def topic_key(domain_id: int, topic: str, msg_type: str) -> str:
+    return f"{domain_id}/{topic.strip('/')}/{mangled_type(msg_type)}/{type_hash(msg_type)}"
+
+
+def node_token(domain_id: int, zid: str, node_id: int, node_name: str) -> str:
+    return (f"@ros2_lv/{domain_id}/{zid}/{node_id}/{node_id}/NN/{mangle('/')}/"
+            f"{mangle('/')}/{node_name}")
+
+
+def entity_token(kind: str, domain_id: int, zid: str, node_id: int, entity_id: int,
+                 node_name: str, topic: str, msg_type: str, qos: str = QOS_KEYEXPR) -> str:
+    """A publisher's (``MP``) or subscription's (``MS``) liveliness token."""
+    topic = topic if topic.startswith("/") else "/" + topic
+    return (f"@ros2_lv/{domain_id}/{zid}/{node_id}/{entity_id}/{kind}/{mangle('/')}/"
+            f"{mangle('/')}/{node_name}/{mangle(topic)}/{mangled_type(msg_type)}/"
+            f"{type_hash(msg_type)}/{qos}")
+
+
+def gid(token: str) -> bytes:
+    """The entity's GID as rmw_zenoh derives it: XXH3-128 of its liveliness key, the low
+    64 bits first, each little endian."""
+    return xxhash.xxh3_128(token.encode()).intdigest().to_bytes(GID_LENGTH, "little")
+
+
+def attachment(sequence: int, stamp_ns: int, publisher_gid: bytes) -> bytes:
+    """The per-sample attachment: int64 sequence number, int64 source timestamp, the GID
+    (zenoh-ext serialisation, as rmw_zenoh's AttachmentData writes it)."""
+    out: bytes = zenoh.ext.z_serialize((zenoh.ext.Int64(sequence), zenoh.ext.Int64(stamp_ns),
+                                        publisher_gid)).to_bytes()
+    return out
+
+
+def ros_time(stamp_ns: int) -> Any:
+    """builtin_interfaces/Time of ``stamp_ns`` (ns since the UNIX epoch)."""
+    return TYPESTORE.types["builtin_interfaces/msg/Time"](sec=stamp_ns // 1_000_000_000,
+                                                         nanosec=stamp_ns % 1_000_000_000)
+
+
+def stamp_of(ros_time_msg: Any) -> int:
+    """ns since the UNIX epoch of a builtin_interfaces/Time."""
+    return int(ros_time_msg.sec) * 1_000_000_000 + int(ros_time_msg.nanosec)
+
+
+def quaternion(yaw: float) -> Any:
+    """A rotation about z by ``yaw`` (rad)."""
+    return TYPESTORE.types["geometry_msgs/msg/Quaternion"](
+        x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
+
+
+def yaw_of(q: Any) -> float:
+    """The rotation about z of a quaternion (the plane's heading)."""
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+class Publisher:
+    """One rmw_zenoh publisher: its key, liveliness token, GID and sequence."""
+
+    def __init__(self, session: zenoh.Session, domain_id: int, node_id: int,
+                 entity_id: int, node_name: str, topic: str, msg_type: str,
+                 qos: str = QOS_KEYEXPR) -> None:
+        self.msg_type = msg_type
+        self.key = topic_key(domain_id, topic, msg_type)
+        self.token_key = entity_token("MP", domain_id, str(session.zid()), node_id, entity_id,
+                                      node_name, topic, msg_type, qos)
+        self.gid = gid(self.token_key)
+        self._sequence = 0
+        self._publisher = session.declare_publisher(self.key)
+        self._token = session.liveliness().declare_token(self.token_key)
+
+    def put(self, payload: bytes) -> None:
+        self._sequence += 1
+        self._publisher.put(payload,
+                            attachment=attachment(self._sequence, time.time_ns(), self.gid))
+
+    def put_message(self, msg: Any) -> None:
+        self.put(bytes(TYPESTORE.serialize_cdr(msg, self.msg_type)))
+
+    def close(self) -> None:
+        self._token.undeclare()
+        self._publisher.undeclare()

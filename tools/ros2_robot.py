@@ -1,0 +1,103 @@
+"""A simulated ROS 2 differential-drive base, as rmw_zenoh carries it (issue 33): it takes
+``geometry_msgs/Twist`` on ``/cmd_vel`` and publishes ``nav_msgs/Odometry`` on ``/odom``
+at ``rate_hz``, as a TurtleBot's base driver does, over a real zenoh session on loopback.
+It stops by itself when no command came within ``cmd_timeout_s`` (as base drivers do).
+The hardware-in-the-loop tests of the ``ros2`` base backend drive it; its odometry is its
+truth (no drift), so what a test checks is the backend's control, not odometry error.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import threading
+import time
+from typing import Any
+
+import numpy as np
+import zenoh
+
+from hal import ros2_wire as wire
+
+ODOMETRY = "nav_msgs/msg/Odometry"
+TWIST = "geometry_msgs/msg/Twist"
+
+
+class Ros2DiffDriveRobot:
+    """A differential-drive base node listening on 127.0.0.1:``port`` (module docstring)."""
+
+    def __init__(self, port: int, rate_hz: float = 50.0, cmd_timeout_s: float = 0.5,
+                 domain_id: int = 0, odom_topic: str = "/odom",
+                 cmd_vel_topic: str = "/cmd_vel") -> None:
+        conf = zenoh.Config()
+        conf.insert_json5("mode", json.dumps("peer"))
+        conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+        conf.insert_json5("scouting/multicast/enabled", "false")
+        self.session = zenoh.open(conf)
+        self.rate_hz, self.cmd_timeout_s = rate_hz, cmd_timeout_s
+        self._lock = threading.Lock()
+        self.pose = (0.0, 0.0, 0.0)  # x, y, yaw in the odometry frame (its truth)
+        self.command = (0.0, 0.0)  # v, w being driven
+        self.commands: list[tuple[float, float, float]] = []  # every Twist (vx, vy, w)
+        self._command_at = 0.0
+        self.publishing = True  # False: odometry goes quiet (a driver that hung)
+        self._odom = wire.Publisher(self.session, domain_id, 0, 1, "base_driver", odom_topic,
+                                    ODOMETRY)
+        self._sub = self.session.declare_subscriber(
+            f"{domain_id}/{cmd_vel_topic.strip('/')}/{wire.mangled_type(TWIST)}/*",
+            self._on_twist)
+        self._running = True
+        self._thread = threading.Thread(target=self._run, name="ros2-robot", daemon=True)
+        self._thread.start()
+
+    def _on_twist(self, sample: zenoh.Sample) -> None:
+        msg: Any = wire.TYPESTORE.deserialize_cdr(sample.payload.to_bytes(), TWIST)
+        with self._lock:
+            self.commands.append((msg.linear.x, msg.linear.y, msg.angular.z))
+            self.command = (float(msg.linear.x), float(msg.angular.z))  # no sideways wheels
+            self._command_at = time.monotonic()
+
+    def _run(self) -> None:
+        last = time.monotonic()
+        period = 1.0 / self.rate_hz
+        while self._running:
+            now = time.monotonic()
+            dt, last = now - last, now
+            with self._lock:
+                if now - self._command_at > self.cmd_timeout_s:
+                    self.command = (0.0, 0.0)
+                v, w = self.command
+                x, y, yaw = self.pose
+                self.pose = (x + v * math.cos(yaw) * dt, y + v * math.sin(yaw) * dt,
+                             math.remainder(yaw + w * dt, 2 * math.pi))
+                pose, publishing = self.pose, self.publishing
+            if publishing:
+                self._publish(pose)
+            time.sleep(max(0.0, period - (time.monotonic() - now)))
+
+    def _publish(self, pose: tuple[float, float, float]) -> None:
+        t = wire.TYPESTORE.types
+        x, y, yaw = pose
+        msg = t[ODOMETRY](
+            header=t["std_msgs/msg/Header"](stamp=wire.ros_time(time.time_ns()),
+                                            frame_id="odom"),
+            child_frame_id="base_link",
+            pose=t["geometry_msgs/msg/PoseWithCovariance"](
+                pose=t["geometry_msgs/msg/Pose"](
+                    position=t["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+                    orientation=wire.quaternion(yaw)),
+                covariance=np.zeros(36)),
+            twist=t["geometry_msgs/msg/TwistWithCovariance"](
+                twist=t[TWIST](linear=t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
+                               angular=t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)),
+                covariance=np.zeros(36)))
+        with contextlib.suppress(Exception):  # zenoh shutting down
+            self._odom.put_message(msg)
+
+    def close(self) -> None:
+        self._running = False
+        self._thread.join(timeout=2.0)
+        self._sub.undeclare()
+        self._odom.close()
+        self.session.close()
