@@ -19,6 +19,8 @@ SUBCOMMANDS = {
     "render": ("tools.simcmd.render", "render plan view, donut and panorama PNGs"),
     "detect-mirror": ("tools.simcmd.detect_mirror", "find the mirror donut in a raw image"),
     "record": ("tools.simcmd.record", "record a scenario to an MCAP file"),
+    "ros2-robot": ("tools.simcmd.ros2_robot", "the simulated robot as a ROS 2 robot over "
+                   "rmw_zenoh (images, /odom, /cmd_vel)"),
 }
 
 

@@ -307,7 +307,8 @@ class Daemon:
                                    "cannot move: Turn Back and Look needs to drive the cross",
                                    api.Reason.BASE_CANNOT_MOVE)
         camera = self.camera.device
-        rate = float(camera.info.rate_hz) if camera is not None else 10.0
+        # A camera that cannot say its rate yet (0) counts as 10 Hz, as learning does.
+        rate = (float(camera.info.rate_hz) if camera is not None else 0.0) or 10.0
         if started_by == "operator":
             self._preempt_autopilot()
         with self._job_lock:

@@ -20,6 +20,7 @@ counted (``bad_messages``), logged once per kind, and dropped; the camera does n
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import json
 import logging
@@ -93,6 +94,7 @@ class Ros2Camera:
         self._shape: tuple[int, ...] = ()
         self._complained: set[str] = set()
         self._counts = {"frames": 0, "skipped": 0, "timeouts": 0, "bad_messages": 0}
+        self._stamps: collections.deque[int] = collections.deque(maxlen=30)  # of messages
 
     def open(self) -> None:
         s = self._settings
@@ -124,8 +126,16 @@ class Ros2Camera:
     def info(self) -> CameraInfo:
         s = self._settings
         h, w = self._shape[:2] if self._shape else (0, 0)
-        return CameraInfo("ros2", f"{s.topic} (domain {s.domain_id})", w, h, 0.0,
+        return CameraInfo("ros2", f"{s.topic} (domain {s.domain_id})", w, h, self.rate_hz(),
                           {"connect": ",".join(s.connect)})
+
+    def rate_hz(self) -> float:
+        """The topic's rate from its last messages' stamps; 0 before two came."""
+        with self._cond:
+            stamps = list(self._stamps)
+        if len(stamps) < 2 or stamps[-1] <= stamps[0]:
+            return 0.0
+        return (len(stamps) - 1) * 1e9 / (stamps[-1] - stamps[0])
 
     def _received(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
@@ -147,6 +157,7 @@ class Ros2Camera:
             if self._frame is not None:
                 self._counts["skipped"] += 1
             self._frame = Frame(image, stamp_ns - offset_ns, self._seq)
+            self._stamps.append(stamp_ns)
             self._shape = image.shape
             self._counts["frames"] += 1
             self._cond.notify_all()

@@ -1,0 +1,191 @@
+"""``placecell-sim ros2-robot``: the simulated robot as a ROS 2 robot over rmw_zenoh
+(issue 33): the configured world seen through the simulated mirror camera, published as
+``sensor_msgs/Image`` (bgr8, or ``CompressedImage`` png with ``--compressed``) on
+``--image-topic``; its base, differential unless ``--holonomic``, publishing
+``nav_msgs/Odometry`` on ``/odom`` (with the simulator's odometry drift) and driven by
+``geometry_msgs/Twist`` on ``/cmd_vel`` (stopped when no command came within
+``--cmd-timeout``, as ROS base drivers do). It runs in real time, listening on
+``--listen`` (loopback by default), until SIGTERM/SIGINT or ``--duration``.
+
+A daemon configured with ``camera.backend = "ros2"`` and ``base.backend = "ros2"``
+connecting there runs the whole method on it, Turn Back and Look included: what a ROS 2
+robot would give it, with the simulator's truth kept out of the daemon.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import json
+import logging
+import signal
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import zenoh
+
+from daemon import config as config_mod
+from hal import ros2_wire as wire
+from hal.sim.factory import build_sim_robot
+from hal.sim.robot import SimRobot
+from kernel.errors import CommandRejectedError
+
+log = logging.getLogger(__name__)
+
+ODOMETRY = "nav_msgs/msg/Odometry"
+TWIST = "geometry_msgs/msg/Twist"
+IMAGE = "sensor_msgs/msg/Image"
+COMPRESSED = "sensor_msgs/msg/CompressedImage"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", help="daemon configuration for the world, mirror and camera "
+                                    "(default: config/placecell.toml or built-in)")
+    p.add_argument("--listen", default="tcp/127.0.0.1:7447", help="zenoh endpoint to listen on")
+    p.add_argument("--domain", type=int, default=0, help="ROS_DOMAIN_ID")
+    p.add_argument("--image-topic", default="/camera/image_raw")
+    p.add_argument("--compressed", action="store_true",
+                   help="publish CompressedImage (png) instead of Image (bgr8)")
+    p.add_argument("--holonomic", action="store_true", help="a holonomic base (default: "
+                   "differential, as most ROS 2 robots)")
+    p.add_argument("--cmd-timeout", type=float, default=0.5,
+                   help="stop when no Twist came within this, s")
+    p.add_argument("--duration", type=float, default=0.0, help="stop after this, s (0: never)")
+    p.add_argument("--scenario", default="", help="a scenario TOML whose world, start pose "
+                   "and faults to use (its autopilot would drive against /cmd_vel; default: "
+                   "the configured world, the robot waiting for commands)")
+    p.add_argument("--start", type=float, nargs=3, metavar=("X", "Y", "YAW"),
+                   help="start pose in the world (default: the world's)")
+
+
+class Ros2SimRobot:
+    """The simulated robot's camera and base as ROS 2 topics (module docstring)."""
+
+    def __init__(self, robot: SimRobot, session: zenoh.Session, domain_id: int,
+                 image_topic: str, compressed: bool, cmd_timeout_s: float) -> None:
+        self.robot, self.session = robot, session
+        self.compressed, self.cmd_timeout_s = compressed, cmd_timeout_s
+        zid = str(session.zid())
+        self._entities: list[Any] = [session.liveliness().declare_token(
+            wire.node_token(domain_id, zid, 0, "sim_robot"))]
+        self._odom = wire.Publisher(session, domain_id, 0, 1, "sim_robot", "/odom", ODOMETRY)
+        self._image = wire.Publisher(session, domain_id, 0, 2, "sim_robot", image_topic,
+                                     COMPRESSED if compressed else IMAGE)
+        self._entities.append(session.declare_subscriber(
+            f"{domain_id}/cmd_vel/{wire.mangled_type(TWIST)}/*", self._on_twist))
+        self._command_at: float | None = None
+        self._stop = threading.Event()
+        # The simulator's clock is the monotonic one (realtime); ROS time is the UNIX one.
+        self._offset_ns = time.time_ns() - time.monotonic_ns()
+
+    def _on_twist(self, sample: zenoh.Sample) -> None:
+        try:
+            msg: Any = wire.TYPESTORE.deserialize_cdr(sample.payload.to_bytes(), TWIST)
+            self.robot.velocity(float(msg.linear.x), float(msg.linear.y), float(msg.angular.z))
+            self._command_at = time.monotonic()
+        except CommandRejectedError as e:
+            log.warning("cmd_vel refused: %s", e)
+        except Exception as e:  # noqa: BLE001 - a bad sample from someone else's node
+            log.warning("cmd_vel: not a Twist: %s", e)
+
+    def _odometry_loop(self) -> None:
+        t = wire.TYPESTORE.types
+        zeros = np.zeros(36)
+        v3 = t["geometry_msgs/msg/Vector3"]
+        while not self._stop.is_set():
+            for o in self.robot.wait_odometry(0.1):
+                msg = t[ODOMETRY](
+                    header=t["std_msgs/msg/Header"](
+                        stamp=wire.ros_time(o.stamp_ns + self._offset_ns), frame_id="odom"),
+                    child_frame_id="base_link",
+                    pose=t["geometry_msgs/msg/PoseWithCovariance"](
+                        pose=t["geometry_msgs/msg/Pose"](
+                            position=t["geometry_msgs/msg/Point"](x=o.x, y=o.y, z=0.0),
+                            orientation=wire.quaternion(o.yaw)), covariance=zeros),
+                    twist=t["geometry_msgs/msg/TwistWithCovariance"](
+                        twist=t[TWIST](linear=v3(x=0.0, y=0.0, z=0.0),
+                                       angular=v3(x=0.0, y=0.0, z=0.0)), covariance=zeros))
+                with contextlib.suppress(Exception):  # zenoh shutting down
+                    self._odom.put_message(msg)
+            at = self._command_at
+            if at is not None and time.monotonic() - at > self.cmd_timeout_s:
+                self._command_at = None
+                self.robot.stop()  # the daemon went quiet: a base driver stops
+
+    def _camera_loop(self) -> None:
+        t = wire.TYPESTORE.types
+        while not self._stop.is_set():
+            frame = self.robot.next_frame(0.5)
+            if frame is None:
+                continue
+            image = frame.image if frame.image.ndim == 3 else cv2.cvtColor(
+                frame.image, cv2.COLOR_GRAY2BGR)
+            header = t["std_msgs/msg/Header"](
+                stamp=wire.ros_time(frame.stamp_ns + self._offset_ns), frame_id="camera")
+            if self.compressed:
+                ok, data = cv2.imencode(".png", image)
+                msg = t[COMPRESSED](header=header, format="png",
+                                    data=np.asarray(data, np.uint8).ravel())
+            else:
+                h, w = image.shape[:2]
+                msg = t[IMAGE](header=header, height=h, width=w, encoding="bgr8",
+                               is_bigendian=0, step=3 * w,
+                               data=np.ascontiguousarray(image).ravel())
+            with contextlib.suppress(Exception):  # zenoh shutting down
+                self._image.put_message(msg)
+
+    def run(self, duration_s: float = 0.0) -> None:
+        threads = [threading.Thread(target=f, name=n, daemon=True) for f, n in
+                   ((self._odometry_loop, "ros2-odom"), (self._camera_loop, "ros2-camera"))]
+        for th in threads:
+            th.start()
+        self._stop.wait(duration_s if duration_s > 0 else None)
+        self._stop.set()
+        for th in threads:
+            th.join(timeout=2.0)
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def close(self) -> None:
+        self.stop()
+        for entity in self._entities:
+            with contextlib.suppress(Exception):
+                entity.undeclare()
+        self._odom.close()
+        self._image.close()
+
+
+def run(args: argparse.Namespace) -> int:
+    path = args.config or ("config/placecell.toml" if Path("config/placecell.toml").is_file()
+                           else None)
+    config = config_mod.load(path)
+    base = dataclasses.replace(config.base.sim, kinematics="holonomic" if args.holonomic
+                               else "differential")
+    sim = dataclasses.replace(config.sim, realtime=True, scenario=args.scenario,
+                              start_pose=list(args.start) if args.start else [0.0, 0.0, 0.0])
+    config = dataclasses.replace(config, sim=sim,
+                                 base=dataclasses.replace(config.base, sim=base))
+    robot = build_sim_robot(config)
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps("peer"))
+    conf.insert_json5("listen/endpoints", json.dumps([args.listen]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    session = zenoh.open(conf)
+    node = Ros2SimRobot(robot, session, args.domain, args.image_topic, args.compressed,
+                        args.cmd_timeout)
+    signal.signal(signal.SIGTERM, lambda *_: node.stop())
+    signal.signal(signal.SIGINT, lambda *_: node.stop())
+    log.info("ROS 2 robot on %s: %s, /odom, /cmd_vel (domain %d)", args.listen,
+             args.image_topic, args.domain)
+    try:
+        node.run(args.duration)
+    finally:
+        node.close()
+        session.close()
+    return 0
