@@ -78,9 +78,14 @@ class Ros2Settings:
                                            "post-dated by this (AMCL's transform_tolerance)")
     tf_period_s: float = setting(0.1, gt=0.0, le=10.0, doc="map -> odom re-sent this often "
                                  "while tracking (between frames)")
+    particle_cloud_topic: str = setting("/particle_cloud", doc="the filter's particles in "
+                                        "the map frame (geometry_msgs/msg/PoseArray, as rviz "
+                                        "shows AMCL's), each tracked frame")
+    particle_cloud_size: int = setting(200, ge=0, le=100_000, doc="at most this many of the "
+                                       "particles, evenly drawn (0: no particle cloud)")
 
     def __post_init__(self) -> None:
-        for name in ("topic", "initial_pose_topic"):
+        for name in ("topic", "initial_pose_topic", "particle_cloud_topic"):
             if not ROS2_TOPIC.match(getattr(self, name)):
                 raise ValueError(f"ros2.{name} {getattr(self, name)!r} is not a ROS 2 topic "
                                  "name (e.g. /placecell/pose: letters, digits, '_' between "

@@ -67,6 +67,13 @@ def main(argv: list[str]) -> int:
                "transforms": _decode_tf(sample.payload.to_bytes()),
                "received_ns": time.time_ns()})
 
+    def on_cloud(sample: zenoh.Sample) -> None:
+        msg = TYPESTORE.deserialize_cdr(sample.payload.to_bytes(), "geometry_msgs/msg/PoseArray")
+        xy = [(p.position.x, p.position.y) for p in msg.poses]
+        write({"kind": "cloud", "key": str(sample.key_expr), "frame_id": msg.header.frame_id,
+               "n": len(xy), "mean": [sum(x for x, _ in xy) / max(len(xy), 1),
+                                      sum(y for _, y in xy) / max(len(xy), 1)]})
+
     def on_token(sample: zenoh.Sample) -> None:
         write({"kind": "token", "key": str(sample.key_expr),
                "alive": sample.kind == zenoh.SampleKind.PUT})
@@ -87,6 +94,7 @@ def main(argv: list[str]) -> int:
         subscribers += [
             session.declare_subscriber("0/placecell/pose/*/*", on_ros),
             session.declare_subscriber("0/tf/*/*", on_tf),
+            session.declare_subscriber("0/particle_cloud/*/*", on_cloud),
             session.liveliness().declare_subscriber("@ros2_lv/0/**", on_token, history=True),
         ]
         time.sleep(max(0.0, seconds - (time.monotonic() - started)))

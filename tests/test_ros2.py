@@ -163,6 +163,16 @@ def test_a_ros2_subscriber_receives_the_tracked_pose(tmp_path: Path,
         assert cov[5, 5] == pytest.approx(place_cov[2, 2], rel=1e-4)
         assert cov[2, 2] == cov[3, 3] == cov[4, 4] == 0.0
     _check_tf(records, tokens, samples)
+    # The particle cloud (a PoseArray in the map frame, as rviz shows AMCL's): at most
+    # particle_cloud_size poses, centred where the published pose is.
+    clouds = [r for r in records if r["kind"] == "cloud"]
+    cloud_hash = JAZZY.hash_rihs01("geometry_msgs/msg/PoseArray")
+    assert len(clouds) >= 5 and {r["key"] for r in clouds} == {
+        f"0/particle_cloud/geometry_msgs::msg::dds_::PoseArray_/{cloud_hash}"}
+    assert all(r["frame_id"] == "map" and 0 < r["n"] <= 200 for r in clouds)
+    for r in clouds:
+        assert any(math.dist(r["mean"], (p["map"]["x"], p["map"]["y"])) < 0.2
+                   for p in poses), (r, poses[-2:])
 
 
 def _transform(t: dict) -> SE2:

@@ -532,11 +532,15 @@ class Daemon:
         """The tracked pose for ROS 2 (daemon/service/ros2.py), stamped on the UNIX clock."""
         assert self._ros2 is not None and belief.covariance is not None
         odo = belief.odometry
+        epoch_ns = belief.stamp_ns + time.time_ns() - time.monotonic_ns()
+        localiser = self.processing.localiser  # this is its thread: the frame just done
+        tracker = None if localiser is None else localiser.tracker
         try:
             self._ros2.publish_tracked(
-                in_map, place, np.array(belief.covariance).reshape(3, 3),
-                belief.stamp_ns + time.time_ns() - time.monotonic_ns(),
+                in_map, place, np.array(belief.covariance).reshape(3, 3), epoch_ns,
                 None if odo is None else SE2(odo.x, odo.y, odo.yaw))
+            if tracker is not None and tracker.place.id == belief.place_id:
+                self._ros2.publish_particles(tracker.filter.particles, place, epoch_ns)
         except Exception as e:  # noqa: BLE001 - zenoh shutting down
             log.debug("publish ROS 2 pose failed: %s", e)
 

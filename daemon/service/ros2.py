@@ -16,7 +16,10 @@ pose and the base's odometry at the frame's stamp, post-dated by
 ``transform_tolerance_s`` and re-sent every ``tf_period_s`` while tracking, nothing
 before the first tracked pose; and with ``odom_tf`` the odometry itself as ``odom ->
 base_link`` (for a base no ROS driver publishes). It subscribes to ``[ros2]
-initial_pose_topic`` (rviz's 2D Pose Estimate): the caller sets the pose from it.
+initial_pose_topic`` (rviz's 2D Pose Estimate): the caller sets the pose from it. The
+filter's particles go out as a ``geometry_msgs/msg/PoseArray`` on ``particle_cloud_topic``
+each tracked frame (at most ``particle_cloud_size``, evenly drawn; nav2's own
+``nav2_msgs/ParticleCloud`` is not in rosbags' type store, and rviz shows a PoseArray).
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from kernel.se2 import SE2
 
 MSG_TYPE = "geometry_msgs/msg/PoseWithCovarianceStamped"
 TF_TYPE = "tf2_msgs/msg/TFMessage"
+CLOUD_TYPE = "geometry_msgs/msg/PoseArray"
 TF_TOPIC = "/tf"
 # rmw_zenoh's name for it: <package>::msg::dds_::<Type>_
 MANGLED_TYPE = "geometry_msgs::msg::dds_::PoseWithCovarianceStamped_"
@@ -151,6 +155,9 @@ class Ros2PosePublisher:
         self.gid = self._pose.gid
         self._tf = wire.Publisher(session, settings.domain_id, node_id, 2, NODE_NAME,
                                   TF_TOPIC, TF_TYPE, TF_QOS_KEYEXPR) if settings.tf else None
+        self._cloud = wire.Publisher(session, settings.domain_id, node_id, 4, NODE_NAME,
+                                     settings.particle_cloud_topic, CLOUD_TYPE) \
+            if settings.particle_cloud_size > 0 else None
         self._session, self._zid, self._node_id = session, zid, node_id
         self._subscribers: list[Any] = []
         self.map_odom: SE2 | None = None  # the last map -> odom published
@@ -168,6 +175,26 @@ class Ros2PosePublisher:
             self.map_odom = in_map.compose(odometry.inverse())
             self.publish_tf(self.map_odom, stamp_ns,
                             odometry if self.settings.odom_tf else None)
+
+    def publish_particles(self, particles_in_place: np.ndarray, place: SE2,
+                          stamp_ns: int) -> None:
+        """The filter's particles (N x 3, x y yaw in the place frame) in the map frame as a
+        PoseArray: at most ``particle_cloud_size`` of them, evenly drawn (every k-th)."""
+        if self._cloud is None or len(particles_in_place) == 0:
+            return
+        step = max(1, -(-len(particles_in_place) // self.settings.particle_cloud_size))
+        p = particles_in_place[::step]
+        c, s = math.cos(place.yaw), math.sin(place.yaw)
+        xs = place.x + c * p[:, 0] - s * p[:, 1]
+        ys = place.y + s * p[:, 0] + c * p[:, 1]
+        t = _TYPESTORE.types
+        poses = [t["geometry_msgs/msg/Pose"](
+            position=t["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=0.0),
+            orientation=_quaternion(float(place.yaw + yaw)))
+            for x, y, yaw in zip(xs, ys, p[:, 2], strict=True)]
+        self._cloud.put_message(t[CLOUD_TYPE](
+            header=t["std_msgs/msg/Header"](stamp=_time(stamp_ns),
+                                            frame_id=self.settings.frame_id), poses=poses))
 
     def resend_map_odom(self) -> None:
         """map -> odom again, post-dated from now (between frames: a slow frame must not
@@ -214,5 +241,6 @@ class Ros2PosePublisher:
             subscriber.undeclare()
         self._node_token.undeclare()
         self._pose.close()
-        if self._tf is not None:
-            self._tf.close()
+        for publisher in (self._tf, self._cloud):
+            if publisher is not None:
+                publisher.close()
