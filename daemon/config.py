@@ -78,6 +78,9 @@ class Ros2Settings:
                                            "post-dated by this (AMCL's transform_tolerance)")
     tf_period_s: float = setting(0.1, gt=0.0, le=10.0, doc="map -> odom re-sent this often "
                                  "while tracking (between frames)")
+    transient_local: bool = setting(True, doc="the pose topic keeps its last sample for late "
+                                    "subscribers (transient-local durability, depth 1, as "
+                                    "AMCL's amcl_pose)")
     particle_cloud_topic: str = setting("/particle_cloud", doc="the filter's particles in "
                                         "the map frame (geometry_msgs/msg/PoseArray, as rviz "
                                         "shows AMCL's), each tracked frame")

@@ -35,6 +35,12 @@ QOS_KEYEXPR = "::,10:,:,:,,"
 GID_LENGTH = 16
 
 
+def transient_local_qos(depth: int) -> str:
+    """The token's QoS of a transient-local publisher keeping ``depth`` samples (durability
+    1, RMW_QOS_POLICY_DURABILITY_TRANSIENT_LOCAL; the other fields rmw_zenoh's defaults)."""
+    return f":1:,{depth}:,:,:,,"
+
+
 def mangle(name: str) -> str:
     """rmw_zenoh's mangling of names inside key expressions: '/' becomes '%'; an empty
     namespace or enclave ('/' or '') is '%'."""
@@ -107,18 +113,25 @@ def yaw_of(q: Any) -> float:
 
 
 class Publisher:
-    """One rmw_zenoh publisher: its key, liveliness token, GID and sequence."""
+    """One rmw_zenoh publisher: its key, liveliness token, GID and sequence. With
+    ``transient_local`` (depth samples kept, as ``/tf_static`` or AMCL's ``amcl_pose``) it
+    is zenoh-ext's AdvancedPublisher with a cache of ``transient_local`` samples and
+    publisher detection, as rmw_zenoh makes one: a late AdvancedSubscriber with history
+    gets the last samples at once."""
 
     def __init__(self, session: zenoh.Session, domain_id: int, node_id: int,
                  entity_id: int, node_name: str, topic: str, msg_type: str,
-                 qos: str = QOS_KEYEXPR) -> None:
+                 qos: str = QOS_KEYEXPR, transient_local: int = 0) -> None:
         self.msg_type = msg_type
         self.key = topic_key(domain_id, topic, msg_type)
         self.token_key = entity_token("MP", domain_id, str(session.zid()), node_id, entity_id,
                                       node_name, topic, msg_type, qos)
         self.gid = gid(self.token_key)
         self._sequence = 0
-        self._publisher = session.declare_publisher(self.key)
+        self._publisher: Any = zenoh.ext.declare_advanced_publisher(
+            session, self.key, cache=zenoh.ext.CacheConfig(transient_local),
+            publisher_detection=True) if transient_local > 0 \
+            else session.declare_publisher(self.key)
         self._token = session.liveliness().declare_token(self.token_key)
 
     def put(self, payload: bytes) -> None:

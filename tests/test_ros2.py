@@ -14,16 +14,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xxhash
+import zenoh
+import zenoh.ext
 from rosbags.typesys import Stores, get_typestore
 
 from daemon.config import from_dict
 from daemon.service import ros2
+from hal import ros2_wire as wire
 from kernel.errors import ConfigError
 from kernel.se2 import SE2
 from tests.conftest import OfficeMap
 from tests.daemon_harness import (
     REPO,
     client_session,
+    free_port,
     read_json_lines,
     running_daemon,
     wait_for,
@@ -132,7 +136,7 @@ def test_a_ros2_subscriber_receives_the_tracked_pose(tmp_path: Path,
     zid = node[0].split("/")[2]
     assert publisher[0] == (f"@ros2_lv/0/{zid}/0/1/MP/%/%/placecell/%placecell%pose/"
                             f"geometry_msgs::msg::dds_::PoseWithCovarianceStamped_/"
-                            f"{hash_jazzy}/::,10:,:,:,,")
+                            f"{hash_jazzy}/:1:,1:,:,:,,")  # transient local, depth 1
     # The attachment: a sequence counting up, a source time now, the publisher's GID.
     unpacked = [struct.unpack("<qqB16s", bytes.fromhex(s["attachment"])) for s in samples]
     assert all(len(bytes.fromhex(s["attachment"])) == 33 for s in samples)
@@ -173,6 +177,40 @@ def test_a_ros2_subscriber_receives_the_tracked_pose(tmp_path: Path,
     for r in clouds:
         assert any(math.dist(r["mean"], (p["map"]["x"], p["map"]["y"])) < 0.2
                    for p in poses), (r, poses[-2:])
+
+
+def test_a_late_subscriber_gets_the_last_pose_from_the_publisher_cache() -> None:
+    """Transient local as rmw_zenoh makes it (zenoh-ext's AdvancedPublisher with a cache and
+    publisher detection): a subscriber that comes after the last pose was sent, with
+    history and late-publisher detection (rmw_zenoh's transient-local subscription),
+    gets it at once."""
+    port = free_port()
+    conf = zenoh.Config()  # as the daemon's session: timestamped (the cache needs it)
+    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("timestamping/enabled", "true")
+    robot = zenoh.open(conf)
+    late = None
+    try:
+        publisher = wire.Publisher(robot, 0, 0, 1, "placecell", "/placecell/pose",
+                                   ros2.MSG_TYPE, wire.transient_local_qos(1), transient_local=1)
+        for k in range(3):  # only the last is kept (depth 1)
+            publisher.put(ros2.pose_cdr(SE2(float(k), 0.0, 0.0), np.eye(3) * 0.01,
+                                        1_764_000_000_000_000_000 + k, "map"))
+        late = client_session(port)
+        heard: list[float] = []
+        late_sub = zenoh.ext.declare_advanced_subscriber(
+            late, "0/placecell/pose/*/*",
+            lambda s: heard.append(ros2.decode_pose(s.payload.to_bytes())[0].x),
+            history=zenoh.ext.HistoryConfig(detect_late_publishers=True))
+        assert wait_for(lambda: bool(heard), 30), "the cached pose never came"
+        assert heard == [2.0]
+        late_sub.undeclare()
+        publisher.close()
+    finally:
+        if late is not None:
+            late.close()
+        robot.close()
 
 
 def _transform(t: dict) -> SE2:

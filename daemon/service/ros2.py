@@ -149,8 +149,10 @@ class Ros2PosePublisher:
         node_id = 0  # the first entities of the session's ROS context
         self.node_token_key = node_token(settings.domain_id, zid, node_id)
         self._node_token = session.liveliness().declare_token(self.node_token_key)
-        self._pose = wire.Publisher(session, settings.domain_id, node_id, 1, NODE_NAME,
-                                    settings.topic, MSG_TYPE, QOS_KEYEXPR)
+        self._pose = wire.Publisher(
+            session, settings.domain_id, node_id, 1, NODE_NAME, settings.topic, MSG_TYPE,
+            wire.transient_local_qos(1) if settings.transient_local else QOS_KEYEXPR,
+            transient_local=1 if settings.transient_local else 0)
         self.key, self.publisher_token_key = self._pose.key, self._pose.token_key
         self.gid = self._pose.gid
         self._tf = wire.Publisher(session, settings.domain_id, node_id, 2, NODE_NAME,
