@@ -10,6 +10,7 @@ from daemon.localisation.relocalisation import (
     after_confirming,
     after_recovering,
     after_tracking,
+    contradicted,
 )
 from daemon.localisation.settings import LocalisationSettings
 
@@ -36,6 +37,14 @@ def test_recovery_steps_go_in_the_order_of_9_3_2() -> None:
     assert after_recovering(False, None, 1, S.recovery_frames - 1, S) == "wait"
     assert after_recovering(False, None, 1, S.recovery_frames, S) == "next step"
     assert after_recovering(False, None, 2, S.recovery_frames, S) == "global"
+
+
+def test_a_frame_whose_view_contradicts_the_estimate_is_not_tracking() -> None:
+    # Office 1's endurance run: kidnapped frames gave 0.000-0.013, tracked ones 0.11 up.
+    assert contradicted(0.007, 0.6, S)  # confident in the few it sees, but carried off
+    assert not contradicted(0.11, 0.4, S)
+    assert contradicted(0.5, 0.0, S)  # no landmark seen agrees: confidence 0
+    assert not contradicted(None, 0.3, S)  # too few usable landmarks: no evidence
 
 
 class Scripted:

@@ -60,6 +60,9 @@ class Belief:
     pose_in_place: tuple[float, float, float] | None = None  # (x, y, θ) in the place frame
     covariance: tuple[float, ...] | None = None  # 3 x 3 of (x, y, θ), row-major
     confidence: float = 0.0  # raw sensor-model output at the estimate, [0, 1]
+    # The same over every landmark usable from the estimate, seen or not (the loss rule's
+    # input, §9.3.1); None without a tracker's frame or with too few usable (no evidence).
+    support: float | None = None
     particles: int = 0
     motion_since_last: tuple[float, float, float] | None = None
     scores: tuple[PlaceScore, ...] = ()  # places recognised in this frame (not every frame)

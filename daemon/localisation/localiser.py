@@ -50,7 +50,7 @@ from daemon.localisation.place_switching import (
     PlaceSwitcher,
     reliable,
 )
-from daemon.localisation.relocalisation import Mode, Relocalisation
+from daemon.localisation.relocalisation import Mode, Relocalisation, contradicted
 from daemon.localisation.sensor_models import make_model
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.acquisition import (
@@ -669,7 +669,16 @@ class Localiser:
         place = tracker.place.id
         state: BeliefState = "tracking"
         reason = f"tracking in place {place}"
-        if self.mode == "confirm":
+        support = None if local is None or math.isnan(local.support) else local.support
+        if self.mode == "track" and local is not None \
+                and contradicted(support, local.confidence, self.settings):
+            state, reason = "lost", (
+                f"the view contradicts the estimate in place {place} (sensor output "
+                f"{0.0 if support is None else support:.3f}, confidence "
+                f"{local.confidence:.2f}): not published as tracking; a loss once the "
+                f"output stays below {self.settings.loss_output} for "
+                f"{self.settings.loss_frames} frames")
+        elif self.mode == "confirm":
             chose = f"resumed in place {place} from the pose saved at the last stop" \
                 if self.reloc.confirming == "resumed" else \
                 f"global relocalisation chose place {place}"
@@ -683,6 +692,7 @@ class Localiser:
                       place_label=tracker.place.label, pose_in_place=est.pose,
                       covariance=tuple(float(v) for v in est.covariance.ravel()),
                       confidence=confidence, particles=len(tracker.filter.particles),
+                      support=support,
                       event=event, **common)  # type: ignore[arg-type]
 
     def _tracked(self) -> Tracked:

@@ -61,6 +61,16 @@ def after_recovering(found: bool, leader: int | None, step: int, frames: int,
     return "wait"
 
 
+def contradicted(support: float | None, confidence: float,
+                 settings: LocalisationSettings) -> bool:
+    """A tracked frame whose view contradicts the estimate: the output over the usable
+    landmarks below ``doubt_output``, or no landmark seen agreeing at all (confidence 0).
+    Such a frame is not published ``tracking`` (issue 31: a robot carried off was
+    published tracking 3.3 m off for the 4 frames before the loss rule fired); ``None``
+    support (too few landmarks usable: no evidence either way) contradicts nothing."""
+    return confidence <= 0.0 or (support is not None and support < settings.doubt_output)
+
+
 # ------------------------------------------------------------------ the machine
 class Trackers(Protocol):
     """What the machine asks of the localiser (daemon/localisation/localiser.py)."""

@@ -111,6 +111,12 @@ class LocalisationSettings:
                                  "kidnapped) is below this counts towards a loss "
                                  "(§9.3.1)...")
     loss_frames: int = setting(5, ge=1, le=1000, doc="...and this many in a row are one")
+    doubt_output: float = setting(0.05, ge=0.0, le=1.0, doc="a frame whose output over "
+                                  "the usable landmarks is below this (or whose confidence "
+                                  "is 0) is not published tracking: the view contradicts "
+                                  "the estimate (kidnapped 0.000-0.013, tracking 0.11 and "
+                                  "up on office 1's endurance run); state lost until the "
+                                  "view agrees again or the loss is declared")
     blind_m: float = setting(2.0, ge=0.0, le=1000.0, doc="odometry travel with no "
                              "evidence (fewer than evidence_landmarks usable from the "
                              "estimate: odometry alone) that is a loss too; 0: never")

@@ -168,7 +168,8 @@ class Endurance:
             "event": None if belief.event is None else
             f"{belief.event.kind} {belief.event.place_id} {belief.event.how}",
             "switched_from": belief.switched_from, "reason": belief.reason,
-            "low_frames": r.localiser.reloc.loss.low_frames}) + "\n")
+            "low_frames": r.localiser.reloc.loss.low_frames,
+            "support": belief.support}) + "\n")
 
     def run(self) -> None:
         r, args = self.r, self.args
