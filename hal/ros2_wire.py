@@ -19,6 +19,7 @@ What rmw_zenoh (Humble, Jazzy) expects (docs/design.md §11):
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from typing import Any
@@ -39,6 +40,21 @@ def transient_local_qos(depth: int) -> str:
     """The token's QoS of a transient-local publisher keeping ``depth`` samples (durability
     1, RMW_QOS_POLICY_DURABILITY_TRANSIENT_LOCAL; the other fields rmw_zenoh's defaults)."""
     return f":1:,{depth}:,:,:,,"
+
+
+def open_session(connect: list[str] | tuple[str, ...] = (),
+                 listen: list[str] | tuple[str, ...] = (), timestamping: bool = False
+                 ) -> zenoh.Session:
+    """A zenoh peer on exactly these endpoints (none but them: no default listener on every
+    address), multicast scouting off; ``timestamping`` for transient-local publishers."""
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps("peer"))
+    conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    if timestamping:
+        conf.insert_json5("timestamping/enabled", "true")
+    return zenoh.open(conf)
 
 
 def mangle(name: str) -> str:

@@ -185,11 +185,8 @@ def test_a_late_subscriber_gets_the_last_pose_from_the_publisher_cache() -> None
     history and late-publisher detection (rmw_zenoh's transient-local subscription),
     gets it at once."""
     port = free_port()
-    conf = zenoh.Config()  # as the daemon's session: timestamped (the cache needs it)
-    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5("timestamping/enabled", "true")
-    robot = zenoh.open(conf)
+    # As the daemon's session: timestamped (the cache needs it).
+    robot = wire.open_session(listen=[f"tcp/127.0.0.1:{port}"], timestamping=True)
     late = None
     try:
         publisher = wire.Publisher(robot, 0, 0, 1, "placecell", "/placecell/pose",

@@ -9,7 +9,6 @@ truth (no drift), so what a test checks is the backend's control, not odometry e
 from __future__ import annotations
 
 import contextlib
-import json
 import math
 import threading
 import time
@@ -30,11 +29,7 @@ class Ros2DiffDriveRobot:
     def __init__(self, port: int, rate_hz: float = 50.0, cmd_timeout_s: float = 0.5,
                  domain_id: int = 0, odom_topic: str = "/odom",
                  cmd_vel_topic: str = "/cmd_vel") -> None:
-        conf = zenoh.Config()
-        conf.insert_json5("mode", json.dumps("peer"))
-        conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-        conf.insert_json5("scouting/multicast/enabled", "false")
-        self.session = zenoh.open(conf)
+        self.session = wire.open_session(listen=[f"tcp/127.0.0.1:{port}"])
         self.rate_hz, self.cmd_timeout_s = rate_hz, cmd_timeout_s
         self._lock = threading.Lock()
         self.pose = (0.0, 0.0, 0.0)  # x, y, yaw in the odometry frame (its truth)

@@ -24,7 +24,6 @@ moving, and when the daemon goes quiet: a ``velocity`` not repeated in time, and
 from __future__ import annotations
 
 import contextlib
-import json
 import logging
 import math
 import threading
@@ -37,7 +36,15 @@ import zenoh
 
 from hal.base.base import BaseInfo, BaseStatus
 from hal.base.settings import Ros2BaseSettings
-from hal.ros2_wire import TYPESTORE, Publisher, mangled_type, node_token, stamp_of, yaw_of
+from hal.ros2_wire import (
+    TYPESTORE,
+    Publisher,
+    mangled_type,
+    node_token,
+    open_session,
+    stamp_of,
+    yaw_of,
+)
 from kernel.angles import wrap_angle
 from kernel.errors import CommandRejectedError, DeviceInitError, DeviceTimeoutError
 from kernel.types import Odometry
@@ -136,13 +143,8 @@ class Ros2Base:
     # ---------------------------------------------------------------- link
     def open(self) -> None:
         s = self._settings
-        conf = zenoh.Config()
         try:
-            conf.insert_json5("mode", json.dumps("peer"))
-            conf.insert_json5("listen/endpoints", json.dumps([]))
-            conf.insert_json5("connect/endpoints", json.dumps(list(s.connect)))
-            conf.insert_json5("scouting/multicast/enabled", "false")
-            session = self._session = zenoh.open(conf)
+            session = self._session = open_session(s.connect)
             self._entities.append(session.liveliness().declare_token(
                 node_token(s.domain_id, str(session.zid()), 0, NODE_NAME)))
             self._entities.append(session.declare_subscriber(

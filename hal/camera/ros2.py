@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import collections
 import contextlib
-import json
 import logging
 import threading
 import time
@@ -35,7 +34,7 @@ import zenoh
 
 from hal.camera.base import CameraInfo, Frame
 from hal.camera.settings import Ros2CameraSettings
-from hal.ros2_wire import TYPESTORE, mangled_type, stamp_of
+from hal.ros2_wire import TYPESTORE, mangled_type, open_session, stamp_of
 from kernel.errors import DeviceInitError, DeviceTimeoutError
 
 log = logging.getLogger(__name__)
@@ -98,13 +97,8 @@ class Ros2Camera:
 
     def open(self) -> None:
         s = self._settings
-        conf = zenoh.Config()
         try:
-            conf.insert_json5("mode", json.dumps("peer"))
-            conf.insert_json5("listen/endpoints", json.dumps([]))
-            conf.insert_json5("connect/endpoints", json.dumps(list(s.connect)))
-            conf.insert_json5("scouting/multicast/enabled", "false")
-            self._session = zenoh.open(conf)
+            self._session = open_session(s.connect)
             self._subscriber = self._session.declare_subscriber(
                 subscription_key(s.domain_id, s.topic), self._received)
         except Exception as e:  # noqa: BLE001 - zenoh's errors carry no common type

@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
-import json
 import logging
 import signal
 import threading
@@ -172,11 +171,7 @@ def run(args: argparse.Namespace) -> int:
     config = dataclasses.replace(config, sim=sim,
                                  base=dataclasses.replace(config.base, sim=base))
     robot = build_sim_robot(config)
-    conf = zenoh.Config()
-    conf.insert_json5("mode", json.dumps("peer"))
-    conf.insert_json5("listen/endpoints", json.dumps([args.listen]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    session = zenoh.open(conf)
+    session = wire.open_session(listen=[args.listen])
     node = Ros2SimRobot(robot, session, args.domain, args.image_topic, args.compressed,
                         args.cmd_timeout)
     signal.signal(signal.SIGTERM, lambda *_: node.stop())
