@@ -42,7 +42,8 @@ class RobotSettings:
 @dataclass(frozen=True)
 class ZenohSettings:
     mode: Literal["peer", "client"] = setting("peer")
-    listen: list[str] = setting(["tcp/127.0.0.1:7447"], doc="endpoints to listen on")
+    listen: list[str] = setting(["tcp/127.0.0.1:7448"], doc="endpoints to listen on (7448: "
+                                "rmw_zenohd, a ROS 2 system's router, has 7447)")
     connect: list[str] = setting([], doc="endpoints to connect to")
     multicast_scouting: bool = setting(False, doc="off: nothing leaves the machine unasked")
     config_file: str = setting("", doc="a zenoh JSON5 configuration read first (access "

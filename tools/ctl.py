@@ -34,11 +34,11 @@ def _endpoints_from_config(path: str | None) -> tuple[str | None, list[str], str
     if not p.is_file():
         if path:
             raise SystemExit(f"placecellctl: cannot read configuration {p}")
-        return None, ["tcp/127.0.0.1:7447"], ""
+        return None, ["tcp/127.0.0.1:7448"], ""
     data = tomllib.loads(p.read_text(encoding="utf-8"))
     robot = data.get("robot", {}).get("name")
     zenoh_section = data.get("zenoh", {})
-    listen = zenoh_section.get("listen", ["tcp/127.0.0.1:7447"])
+    listen = zenoh_section.get("listen", ["tcp/127.0.0.1:7448"])
     return robot, listen, str(zenoh_section.get("id", ""))
 
 

@@ -670,10 +670,12 @@ class Localiser:
         state: BeliefState = "tracking"
         reason = f"tracking in place {place}"
         support = None if local is None or math.isnan(local.support) else local.support
-        if self.mode == "track" and local is not None \
+        if self.mode == "track" and local is not None and switched_from is None \
                 and contradicted(support, local.confidence, self.settings):
+            # (A frame that switched places scored the place it left: nothing to doubt.)
             state, reason = "lost", (
-                f"the view contradicts the estimate in place {place} (sensor output "
+                f"the view does not support the estimate in place {place}: its landmarks "
+                f"are not where the estimate puts them (sensor output "
                 f"{0.0 if support is None else support:.3f}, confidence "
                 f"{local.confidence:.2f}): not published as tracking; a loss once the "
                 f"output stays below {self.settings.loss_output} for "

@@ -2,7 +2,8 @@
 (issue 33): the configured world seen through the simulated mirror camera, published as
 ``sensor_msgs/Image`` (bgr8, or ``CompressedImage`` png with ``--compressed``) on
 ``--image-topic``; its base, differential unless ``--holonomic``, publishing
-``nav_msgs/Odometry`` on ``/odom`` (with the simulator's odometry drift) and driven by
+``nav_msgs/Odometry`` on ``/odom`` and ``odom -> base_link`` on ``/tf`` (with the
+simulator's odometry drift) and driven by
 ``geometry_msgs/Twist`` on ``/cmd_vel`` (stopped when no command came within
 ``--cmd-timeout``, as ROS base drivers do). It runs in real time, listening on
 ``--listen`` (loopback by default), until SIGTERM/SIGINT or ``--duration``.
@@ -29,10 +30,12 @@ import numpy as np
 import zenoh
 
 from daemon import config as config_mod
+from daemon.service.ros2 import TF_QOS_KEYEXPR, TF_TYPE, tf_cdr
 from hal import ros2_wire as wire
 from hal.sim.factory import build_sim_robot
 from hal.sim.robot import SimRobot
 from kernel.errors import CommandRejectedError
+from kernel.se2 import SE2
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +63,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "the configured world, the robot waiting for commands)")
     p.add_argument("--start", type=float, nargs=3, metavar=("X", "Y", "YAW"),
                    help="start pose in the world (default: the world's)")
+    p.add_argument("--truth-out", default="", help="append the true pose per step here "
+                   "(JSON lines, for tests; never published)")
 
 
 class Ros2SimRobot:
@@ -75,6 +80,8 @@ class Ros2SimRobot:
         self._odom = wire.Publisher(session, domain_id, 0, 1, "sim_robot", "/odom", ODOMETRY)
         self._image = wire.Publisher(session, domain_id, 0, 2, "sim_robot", image_topic,
                                      COMPRESSED if compressed else IMAGE)
+        self._tf = wire.Publisher(session, domain_id, 0, 3, "sim_robot", "/tf", TF_TYPE,
+                                  TF_QOS_KEYEXPR)
         self._entities.append(session.declare_subscriber(
             f"{domain_id}/cmd_vel/{wire.mangled_type(TWIST)}/*", self._on_twist))
         self._command_at: float | None = None
@@ -111,6 +118,8 @@ class Ros2SimRobot:
                                        angular=v3(x=0.0, y=0.0, z=0.0)), covariance=zeros))
                 with contextlib.suppress(Exception):  # zenoh shutting down
                     self._odom.put_message(msg)
+                    self._tf.put(tf_cdr([("odom", "base_link", SE2(o.x, o.y, o.yaw),
+                                          o.stamp_ns + self._offset_ns)]))
             at = self._command_at
             if at is not None and time.monotonic() - at > self.cmd_timeout_s:
                 self._command_at = None
@@ -156,8 +165,8 @@ class Ros2SimRobot:
         for entity in self._entities:
             with contextlib.suppress(Exception):
                 entity.undeclare()
-        self._odom.close()
-        self._image.close()
+        for publisher in (self._odom, self._image, self._tf):
+            publisher.close()
 
 
 def run(args: argparse.Namespace) -> int:
@@ -167,7 +176,8 @@ def run(args: argparse.Namespace) -> int:
     base = dataclasses.replace(config.base.sim, kinematics="holonomic" if args.holonomic
                                else "differential")
     sim = dataclasses.replace(config.sim, realtime=True, scenario=args.scenario,
-                              start_pose=list(args.start) if args.start else [0.0, 0.0, 0.0])
+                              start_pose=list(args.start) if args.start else [0.0, 0.0, 0.0],
+                              truth_out=args.truth_out)
     config = dataclasses.replace(config, sim=sim,
                                  base=dataclasses.replace(config.base, sim=base))
     robot = build_sim_robot(config)
