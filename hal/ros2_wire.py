@@ -27,7 +27,8 @@ from typing import Any
 import xxhash
 import zenoh
 import zenoh.ext
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.typesys.base import Nodetype
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 # QoS as rmw_zenoh writes it in a token, fields equal to its defaults left empty:
@@ -40,6 +41,38 @@ def transient_local_qos(depth: int) -> str:
     """The token's QoS of a transient-local publisher keeping ``depth`` samples (durability
     1, RMW_QOS_POLICY_DURABILITY_TRANSIENT_LOCAL; the other fields rmw_zenoh's defaults)."""
     return f":1:,{depth}:,:,:,,"
+
+
+def register_service(service_type: str, request: str, response: str) -> str:
+    """Register ``<service_type>_Request`` and ``_Response`` (message definitions, as the
+    two halves of a .srv) in TYPESTORE, and return the service's RIHS01 hash: REP-2011's
+    hash of the type description with fields request_message, response_message and
+    event_message (``_Event``: info, request[<=1], response[<=1]) — rosidl's. Computed in a
+    store of its own whose service_msgs/ServiceEventInfo has ``uint8[16] client_gid`` as
+    rosidl sees it (rosbags ships it as char[16], which hashes otherwise); checked against
+    hashes a ROS build generated (tests/test_ros2.py)."""
+    req = next(iter(get_types_from_msg(request, "placecell_srv/msg/Request").values()))
+    resp = next(iter(get_types_from_msg(response, "placecell_srv/msg/Response").values()))
+    halves = {f"{service_type}_Request": req, f"{service_type}_Response": resp}
+    if f"{service_type}_Request" not in TYPESTORE.fielddefs:
+        TYPESTORE.register(halves)
+    store = get_typestore(Stores.ROS2_JAZZY)
+    store.fielddefs.pop("service_msgs/msg/ServiceEventInfo", None)
+    store.register({
+        **get_types_from_msg("uint8 event_type\nbuiltin_interfaces/Time stamp\n"
+                             "uint8[16] client_gid\nint64 sequence_number\n",
+                             "service_msgs/msg/ServiceEventInfo"),
+        **halves,
+        f"{service_type}_Event": ([], [
+            ("info", (Nodetype.NAME, "service_msgs/msg/ServiceEventInfo")),
+            ("request", (Nodetype.SEQUENCE, ((Nodetype.NAME, f"{service_type}_Request"), 1))),
+            ("response", (Nodetype.SEQUENCE, ((Nodetype.NAME, f"{service_type}_Response"),
+                                              1)))])})
+    store.register({service_type: ([], [
+        ("request_message", (Nodetype.NAME, f"{service_type}_Request")),
+        ("response_message", (Nodetype.NAME, f"{service_type}_Response")),
+        ("event_message", (Nodetype.NAME, f"{service_type}_Event"))])})
+    return str(store.hash_rihs01(service_type))
 
 
 def open_session(connect: list[str] | tuple[str, ...] = (),
@@ -84,12 +117,14 @@ def node_token(domain_id: int, zid: str, node_id: int, node_name: str) -> str:
 
 
 def entity_token(kind: str, domain_id: int, zid: str, node_id: int, entity_id: int,
-                 node_name: str, topic: str, msg_type: str, qos: str = QOS_KEYEXPR) -> str:
-    """A publisher's (``MP``) or subscription's (``MS``) liveliness token."""
+                 node_name: str, topic: str, msg_type: str, qos: str = QOS_KEYEXPR,
+                 hash_: str | None = None) -> str:
+    """A publisher's (``MP``), subscription's (``MS``) or service server's (``SS``)
+    liveliness token; ``hash_`` for a service type (type_hash knows messages only)."""
     topic = topic if topic.startswith("/") else "/" + topic
     return (f"@ros2_lv/{domain_id}/{zid}/{node_id}/{entity_id}/{kind}/{mangle('/')}/"
             f"{mangle('/')}/{node_name}/{mangle(topic)}/{mangled_type(msg_type)}/"
-            f"{type_hash(msg_type)}/{qos}")
+            f"{hash_ or type_hash(msg_type)}/{qos}")
 
 
 def gid(token: str) -> bytes:
@@ -161,3 +196,40 @@ class Publisher:
     def close(self) -> None:
         self._token.undeclare()
         self._publisher.undeclare()
+
+
+class ServiceServer:
+    """One rmw_zenoh service server: a queryable (complete) on the service key and an
+    ``SS`` liveliness token. Each request's attachment (sequence number, time, client GID)
+    is echoed in the reply with a new time; ``handle(request) -> response`` works on the
+    decoded messages; a request that does not decode gets no reply (logged by the caller's
+    ``on_error``)."""
+
+    def __init__(self, session: zenoh.Session, domain_id: int, node_id: int,
+                 entity_id: int, node_name: str, service: str, service_type: str,
+                 service_hash: str, handle: Any, on_error: Any) -> None:
+        self.key = f"{domain_id}/{service.strip('/')}/{mangled_type(service_type)}/{service_hash}"
+        self.token_key = entity_token("SS", domain_id, str(session.zid()), node_id, entity_id,
+                                      node_name, service, service_type, hash_=service_hash)
+        self._type, self._handle, self._on_error = service_type, handle, on_error
+        self._queryable = session.declare_queryable(self.key, self._query, complete=True)
+        self._token = session.liveliness().declare_token(self.token_key)
+
+    def _query(self, query: zenoh.Query) -> None:
+        try:
+            payload = query.payload.to_bytes() if query.payload is not None else b""
+            request = TYPESTORE.deserialize_cdr(payload, f"{self._type}_Request")
+            if query.attachment is None:
+                raise ValueError("no attachment (sequence number, time, client GID)")
+            sequence, _, client = zenoh.ext.z_deserialize(
+                tuple[zenoh.ext.Int64, zenoh.ext.Int64, bytes], query.attachment)
+        except Exception as e:  # noqa: BLE001 - a request from someone else's node
+            self._on_error(f"{self.key}: a request that is not a {self._type}: {e}")
+            return
+        response = self._handle(request)
+        query.reply(self.key, bytes(TYPESTORE.serialize_cdr(response, f"{self._type}_Response")),
+                    attachment=attachment(int(sequence), time.time_ns(), bytes(client)))
+
+    def undeclare(self) -> None:
+        self._token.undeclare()
+        self._queryable.undeclare()

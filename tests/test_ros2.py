@@ -9,6 +9,7 @@ import math
 import struct
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -179,6 +180,20 @@ def test_a_ros2_subscriber_receives_the_tracked_pose(tmp_path: Path,
                    for p in poses), (r, poses[-2:])
 
 
+def test_service_type_hashes_are_the_ones_rosidl_generates() -> None:
+    """rosbags has no service types; the hash of a service's type description (request,
+    response and event messages) is computed as rosidl does. Checked against the hashes
+    rosidl generated in ROS 2 builds (the generated ``__description.c`` of std_srvs'
+    Empty and of a package's RobotiqReset service, whose four hashes differ)."""
+    assert wire.register_service("std_srvs/srv/Empty", "", "") == (
+        "RIHS01_5888399dedec5ccc85ea6451949fd2c9f97bfdf963f9a588821639fcd31b5d19")
+    assert wire.register_service(
+        "xarm_msgs/srv/RobotiqReset", "", "int16 ret\nstring message\nuint8[] ret_data\n") \
+        == "RIHS01_428749aa4e0ea8bcb86adae792667b823d91c8b348424bdcb6f6e2ed08f2cbe4"
+    assert ros2.EMPTY_SRV_HASH == "RIHS01_" \
+        "5888399dedec5ccc85ea6451949fd2c9f97bfdf963f9a588821639fcd31b5d19"
+
+
 def test_a_late_subscriber_gets_the_last_pose_from_the_publisher_cache() -> None:
     """Transient local as rmw_zenoh makes it (zenoh-ext's AdvancedPublisher with a cache and
     publisher detection): a subscriber that comes after the last pose was sent, with
@@ -300,9 +315,62 @@ def test_an_initial_pose_from_ros2_moves_the_pose_there(tmp_path: Path,
 
             assert wait_for(lambda: bool(set_since()), 30)
             after = set_since()[0]
+            _amcl_services(session, initial(now["x"], now["y"], now["yaw"], "map"), poses,
+                           events)
         finally:
             session.close()
     set_events = [e for e in events if e["event"] == "pose_set"]
-    assert len(set_events) == 1 and set_events[0]["source"] == "/initialpose", set_events
+    assert [e["source"] for e in set_events] == ["/initialpose", "/set_initial_pose"], \
+        set_events
     assert math.hypot(after["x"] - target[0], after["y"] - target[1]) < 0.15, (after, target)
     assert abs(math.remainder(after["yaw"] - target[2], math.tau)) < 0.15, (after, target)
+
+
+EMPTY_CDR = b"\x00\x01\x00\x00\x00"  # an empty request or response: one uint8, 0
+EMPTY_HASH = "RIHS01_5888399dedec5ccc85ea6451949fd2c9f97bfdf963f9a588821639fcd31b5d19"
+
+
+def _call(session: zenoh.Session, service: str, srv_type: str, srv_hash: str,
+          request: bytes, sequence: int) -> bytes:
+    """A service call as rmw_zenoh's client makes it: a query for all complete queryables
+    of the service key with the request in CDR and an attachment (sequence number, time,
+    client GID); the reply must echo the sequence number and the GID."""
+    gid = bytes(range(16))
+    attachment = zenoh.ext.z_serialize((zenoh.ext.Int64(sequence), zenoh.ext.Int64(0),
+                                        gid)).to_bytes()
+    replies = list(session.get(f"0/{service}/{srv_type}/{srv_hash}", payload=request,
+                               attachment=attachment, target=zenoh.QueryTarget.ALL_COMPLETE,
+                               consolidation=zenoh.ConsolidationMode.NONE, timeout=10.0))
+    assert len(replies) == 1 and replies[0].ok is not None, replies
+    reply = replies[0].ok
+    assert reply.attachment is not None
+    echoed = zenoh.ext.z_deserialize(tuple[zenoh.ext.Int64, zenoh.ext.Int64, bytes],
+                                     reply.attachment)
+    assert int(echoed[0]) == sequence and bytes(echoed[2]) == gid and int(echoed[1]) > 0
+    return bytes(reply.payload.to_bytes())
+
+
+def _amcl_services(session: zenoh.Session, pose_request: bytes, poses: list[dict],
+                   events: list[dict]) -> None:
+    """nav2_amcl's two services on the daemon: set_initial_pose (nav2_msgs/SetInitialPose,
+    whose request is a PoseWithCovarianceStamped) sets the pose; then
+    reinitialize_global_localization (std_srvs/Empty) starts a global search. Both answer
+    with their empty response; their SS liveliness tokens carry the service hashes (std_srvs'
+    Empty as a ROS 2 build generates it)."""
+    tokens = [str(r.ok.key_expr) for r in session.liveliness().get("@ros2_lv/0/**",
+                                                                     timeout=5.0) if r.ok]
+    assert [t for t in tokens if "/SS/%/%/placecell/%reinitialize_global_localization/"
+            f"std_srvs::srv::dds_::Empty_/{EMPTY_HASH}/" in t], tokens
+    set_pose = [t for t in tokens if "/SS/%/%/placecell/%set_initial_pose/"
+                "nav2_msgs::srv::dds_::SetInitialPose_/RIHS01_" in t]
+    assert len(set_pose) == 1, tokens
+    set_pose_hash = set_pose[0].split("/")[-2]  # as a client learns it from the graph
+    assert _call(session, "set_initial_pose", "nav2_msgs::srv::dds_::SetInitialPose_",
+                 set_pose_hash, pose_request, 41) == EMPTY_CDR
+    assert wait_for(lambda: any(e["event"] == "pose_set" and e["source"] == "/set_initial_pose"
+                                for e in events), 30), events
+    called_ns = time.monotonic_ns()
+    assert _call(session, "reinitialize_global_localization", "std_srvs::srv::dds_::Empty_",
+                 EMPTY_HASH, EMPTY_CDR, 42) == EMPTY_CDR
+    assert wait_for(lambda: any(p["state"] == "relocalising" and p["stamp_ns"] > called_ns
+                                for p in poses), 30), poses[-1:]

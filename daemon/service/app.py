@@ -199,6 +199,7 @@ class Daemon:
         if self.config.ros2.enabled:  # the pose for ROS 2 nodes (design §11)
             self._ros2 = Ros2PosePublisher(s, self.config.ros2)
             self._ros2.on_initial_pose(self._initial_pose)
+            self._ros2.serve(self._ros2_relocalise, self._initial_pose)  # AMCL's services
             log.info("ROS 2: publishing %s on %s", self.config.ros2.topic, self._ros2.key)
         # Late joiners (placecellctl status) get the latest status at once by query.
         answers = (("status", self._answer_status),
@@ -428,18 +429,21 @@ class Daemon:
         query.reply(query.key_expr, api.result(place=request.place, x=request.x, y=request.y,
                                                yaw=request.yaw))
 
-    def _initial_pose(self, pose: SE2, covariance: np.ndarray, frame_id: str) -> None:
-        """A pose in the map frame from ROS 2 (/initialpose, rviz's 2D Pose Estimate):
-        tracked from there, in the place the map puts nearest it (design §11)."""
+    def _initial_pose(self, pose: SE2, covariance: np.ndarray, frame_id: str,
+                      source: str | None = None) -> None:
+        """A pose in the map frame from ROS 2 (``source``: /initialpose, rviz's 2D Pose
+        Estimate, by default; or the set_initial_pose service): tracked from there, in the
+        place the map puts nearest it (design §11)."""
         settings = self.config.ros2
+        source = source or settings.initial_pose_topic
         localiser = self.processing.localiser
         if frame_id != settings.frame_id:
-            log.warning("%s in frame %r ignored: poses are set in %r", settings.
-                        initial_pose_topic, frame_id, settings.frame_id)
+            log.warning("%s in frame %r ignored: poses are set in %r", source, frame_id,
+                        settings.frame_id)
             return
         frame = self.mapper.map_frame
         if localiser is None or not frame:
-            log.warning("%s ignored: %s", settings.initial_pose_topic,
+            log.warning("%s ignored: %s", source,
                         "the localiser is not running" if localiser is None
                         else "no place is in the map frame yet")
             return
@@ -449,9 +453,9 @@ class Daemon:
         sigma_yaw = math.sqrt(max(covariance[2, 2], 0.0)) or None
         self._operator_acted()
         localiser.set_pose(place, in_place.as_tuple(), sigma_xy, sigma_yaw)
-        log.info("pose set from %s: place %d at %s", settings.initial_pose_topic, place,
+        log.info("pose set from %s: place %d at %s", source, place,
                  in_place)
-        self.publish_event("pose_set", source=settings.initial_pose_topic, place=place,
+        self.publish_event("pose_set", source=source, place=place,
                            x=round(in_place.x, 4), y=round(in_place.y, 4),
                            yaw=round(in_place.yaw, 5))
 
@@ -476,6 +480,17 @@ class Daemon:
         log.info("relocalisation requested")
         query.reply(query.key_expr, api.result(relocalising=True,
                                                places=self.mapper.place_count()))
+
+    def _ros2_relocalise(self) -> None:
+        """ROS 2's reinitialize_global_localization (as AMCL's): cmd/relocalise."""
+        localiser = self.processing.localiser
+        if localiser is None or self.mapper.place_count() == 0:
+            log.warning("reinitialize_global_localization ignored: %s", "the localiser is "
+                        "not running" if localiser is None else "the map has no places")
+            return
+        self._operator_acted()
+        localiser.relocalise()
+        log.info("relocalisation requested over ROS 2")
 
     def _answer_mode(self, query: zenoh.Query) -> None:
         """cmd/mode: switch between mapping and localisation (design §11); refused while

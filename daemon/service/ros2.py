@@ -20,6 +20,10 @@ initial_pose_topic`` (rviz's 2D Pose Estimate): the caller sets the pose from it
 filter's particles go out as a ``geometry_msgs/msg/PoseArray`` on ``particle_cloud_topic``
 each tracked frame (at most ``particle_cloud_size``, evenly drawn; nav2's own
 ``nav2_msgs/ParticleCloud`` is not in rosbags' type store, and rviz shows a PoseArray).
+It serves AMCL's two services as rmw_zenoh serves them (a complete queryable on the
+service key, the request's attachment echoed with a new time):
+``/reinitialize_global_localization`` (std_srvs/Empty: a global search) and
+``/set_initial_pose`` (nav2_msgs/SetInitialPose: as /initialpose), with ``SS`` tokens.
 """
 
 from __future__ import annotations
@@ -41,6 +45,13 @@ from kernel.se2 import SE2
 MSG_TYPE = "geometry_msgs/msg/PoseWithCovarianceStamped"
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 CLOUD_TYPE = "geometry_msgs/msg/PoseArray"
+# nav2_amcl's services (their definitions; rosbags has no srv types, hal/ros2_wire.py
+# registers them and computes their hashes as rosidl does).
+EMPTY_SRV, SET_POSE_SRV = "std_srvs/srv/Empty", "nav2_msgs/srv/SetInitialPose"
+EMPTY_SRV_HASH = wire.register_service(EMPTY_SRV, "", "")
+SET_POSE_SRV_HASH = wire.register_service(
+    SET_POSE_SRV, "geometry_msgs/PoseWithCovarianceStamped pose\n", "")
+RELOCALISE_SERVICE, SET_POSE_SERVICE = "/reinitialize_global_localization", "/set_initial_pose"
 TF_TOPIC = "/tf"
 # rmw_zenoh's name for it: <package>::msg::dds_::<Type>_
 MANGLED_TYPE = "geometry_msgs::msg::dds_::PoseWithCovarianceStamped_"
@@ -91,6 +102,11 @@ def decode_pose(payload: bytes) -> tuple[SE2, np.ndarray, str]:
         msg: Any = _TYPESTORE.deserialize_cdr(payload, MSG_TYPE)
     except Exception as e:  # noqa: BLE001 - rosbags raises several kinds on bad bytes
         raise ValueError(f"not a {MSG_TYPE}: {e}") from e
+    return pose_of(msg)
+
+
+def pose_of(msg: Any) -> tuple[SE2, np.ndarray, str]:
+    """decode_pose's values of a decoded PoseWithCovarianceStamped."""
     p = msg.pose.pose.position
     yaw = wire.yaw_of(msg.pose.pose.orientation)
     full = np.asarray(msg.pose.covariance, dtype=np.float64).reshape(6, 6)
@@ -220,6 +236,32 @@ class Ros2PosePublisher:
         self._subscribers.append(self._session.declare_subscriber(key, received))
         self._subscribers.append(self._session.liveliness().declare_token(subscription_token(
             s.domain_id, self._zid, self._node_id, 3, s.initial_pose_topic)))
+
+    def serve(self, relocalise: Callable[[], None],
+              set_pose: Callable[[SE2, np.ndarray, str, str], None]) -> None:
+        """AMCL's services: ``/reinitialize_global_localization`` (std_srvs/Empty) calls
+        ``relocalise``; ``/set_initial_pose`` (nav2_msgs/SetInitialPose) hands its pose to
+        ``set_pose`` as /initialpose does. Both answer with their empty response."""
+        s = self.settings
+
+        def relocalise_now(_: Any) -> Any:
+            relocalise()
+            return _TYPESTORE.types[f"{EMPTY_SRV}_Response"]()
+
+        def set_pose_now(request: Any) -> Any:
+            set_pose(*pose_of(request.pose), SET_POSE_SERVICE)
+            return _TYPESTORE.types[f"{SET_POSE_SRV}_Response"]()
+
+        def refused(message: str) -> None:
+            log.warning("%s; no reply", message)
+
+        self._subscribers += [
+            wire.ServiceServer(self._session, s.domain_id, self._node_id, 5, NODE_NAME,
+                               RELOCALISE_SERVICE, EMPTY_SRV, EMPTY_SRV_HASH,
+                               relocalise_now, refused),
+            wire.ServiceServer(self._session, s.domain_id, self._node_id, 6, NODE_NAME,
+                               SET_POSE_SERVICE, SET_POSE_SRV, SET_POSE_SRV_HASH,
+                               set_pose_now, refused)]
 
     def publish(self, pose: SE2, covariance: np.ndarray, stamp_ns: int) -> None:
         """``stamp_ns``: the frame's time since the UNIX epoch (ROS time)."""
