@@ -1,6 +1,6 @@
 """The `ros2` base backend (hal/base/ros2.py, issue 33): nav_msgs/Odometry in, Twist out,
 moves closed on that odometry, and the watchdog; against a simulated ROS 2
-differential-drive base (tools/ros2_robot.py) over a real zenoh session on loopback."""
+differential-drive base (tests/ros2_diffdrive.py) over a real zenoh session on loopback."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from hal.base.settings import BaseSettings, Ros2BaseSettings
 from hal.registry import HalContext, create_base
 from kernel.errors import CommandRejectedError, ConfigError
 from tests.daemon_harness import free_port, wait_for
-from tools.ros2_robot import Ros2DiffDriveRobot
+from tests.ros2_diffdrive import Ros2DiffDriveRobot
 
 S = Ros2BaseSettings()
 # Waits scale with the settings they wait on (a busy machine slows the control loop).
