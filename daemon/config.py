@@ -79,6 +79,11 @@ class Ros2Settings:
                                            "post-dated by this (AMCL's transform_tolerance)")
     tf_period_s: float = setting(0.1, gt=0.0, le=10.0, doc="map -> odom re-sent this often "
                                  "while tracking (between frames)")
+    tie_site_map: bool = setting(False, doc="the first pose on initial_pose_topic (or "
+                                 "set_initial_pose) while tracking and not yet tied ties the "
+                                 "map frame to the site's map (nav2's occupancy map) instead "
+                                 "of moving the pose; stored with the map, then every ROS 2 "
+                                 "pose in and out is in the site's map")
     transient_local: bool = setting(True, doc="the pose topic keeps its last sample for late "
                                     "subscribers (transient-local durability, depth 1, as "
                                     "AMCL's amcl_pose)")

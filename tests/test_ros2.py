@@ -21,6 +21,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from daemon.config import from_dict
 from daemon.service import ros2
+from daemon.store.sqlite_store import MapStore
 from hal import ros2_wire as wire
 from kernel.errors import ConfigError
 from kernel.se2 import SE2
@@ -374,3 +375,71 @@ def _amcl_services(session: zenoh.Session, pose_request: bytes, poses: list[dict
                  EMPTY_HASH, EMPTY_CDR, 42) == EMPTY_CDR
     assert wait_for(lambda: any(p["state"] == "relocalising" and p["stamp_ns"] > called_ns
                                 for p in poses), 30), poses[-1:]
+
+
+@pytest.mark.timeout(240)
+def test_the_first_initial_pose_ties_the_map_to_the_site_and_ros_poses_follow(
+        tmp_path: Path, office_map: OfficeMap) -> None:
+    """nav2's occupancy map and placecell's map frame (design §11): with [ros2]
+    tie_site_map, the first /initialpose while tracking says where the robot stands in the
+    site's map; the map frame is tied there (event site_tied, stored with the map) and the
+    ROS 2 pose is from then on in the site's map, while placecell's own pose is not."""
+    office_map(tmp_path / "map.db")
+    config, port = write_config(tmp_path, {
+        "robot": {"name": "rosbot"}, "mapping": {"mode": "localisation"},
+        "sim": {"start_pose": [4.75, 10.15, 0.4]},
+        "ros2": {"enabled": True, "tie_site_map": True}})
+    site = SE2(20.0, -5.0, 1.0)  # placecell's map frame in the site's map
+    poses: list[dict] = []
+    ros: list[tuple[float, float, float]] = []
+    events: list[dict] = []
+    t = JAZZY.types
+    with running_daemon(config):
+        session = client_session(port)
+        try:
+            session.declare_subscriber("placecell/rosbot/pose", lambda s: poses.append(
+                json.loads(s.payload.to_bytes())))
+            session.declare_subscriber("placecell/rosbot/events", lambda s: events.append(
+                json.loads(s.payload.to_bytes())))
+
+            def heard(sample: zenoh.Sample) -> None:
+                pose, _, _ = ros2.decode_pose(sample.payload.to_bytes())
+                ros.append((pose.x, pose.y, pose.yaw))
+            session.declare_subscriber("0/placecell/pose/*/*", heard)
+            assert wait_for(lambda: any(p["state"] == "tracking" and p["map"] for p in poses),
+                            120), poses[-1:]
+            m = next(p["map"] for p in reversed(poses) if p["map"])
+            here = site.compose(SE2(m["x"], m["y"], m["yaw"]))  # the robot in the site's map
+            cov = np.zeros(36)
+            msg = t[POSE_TYPE](
+                header=t["std_msgs/msg/Header"](
+                    stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="map"),
+                pose=t["geometry_msgs/msg/PoseWithCovariance"](
+                    pose=t["geometry_msgs/msg/Pose"](
+                        position=t["geometry_msgs/msg/Point"](x=here.x, y=here.y, z=0.0),
+                        orientation=t["geometry_msgs/msg/Quaternion"](
+                            x=0.0, y=0.0, z=math.sin(here.yaw / 2), w=math.cos(here.yaw / 2))),
+                    covariance=cov))
+            key = (f"0/initialpose/geometry_msgs::msg::dds_::PoseWithCovarianceStamped_/"
+                   f"{JAZZY.hash_rihs01(POSE_TYPE)}")
+            session.put(key, bytes(JAZZY.serialize_cdr(msg, POSE_TYPE)))
+            assert wait_for(lambda: any(e["event"] == "site_tied" for e in events), 30), events
+            tied = next(e for e in events if e["event"] == "site_tied")
+            heard_before = len(ros)
+            assert wait_for(lambda: len(ros) > heard_before + 3, 30)
+            latest = ros[-1]
+            mine = next(p["map"] for p in reversed(poses) if p["map"])
+        finally:
+            session.close()
+    # The robot stands still: the tie is the site's pose of the map frame, to centimetres.
+    assert math.hypot(tied["x"] - site.x, tied["y"] - site.y) < 0.03, tied
+    assert abs(math.remainder(tied["yaw"] - site.yaw, math.tau)) < 0.01, tied
+    assert tied["frame"] == "map" and tied["source"] == "/initialpose"
+    assert not any(e["event"] == "pose_set" for e in events)  # the tie moved nothing
+    # ROS 2 poses in the site's map; placecell's own still in its map frame.
+    assert math.hypot(latest[0] - here.x, latest[1] - here.y) < 0.05, (latest, here)
+    assert math.hypot(mine["x"] - m["x"], mine["y"] - m["y"]) < 0.05, (mine, m)
+    with MapStore.open(tmp_path / "map.db", None, readonly=True) as store:
+        kept = store.site_tie()
+    assert kept is not None and kept[0] == "map"
+    assert math.hypot(kept[1] - tied["x"], kept[2] - tied["y"]) < 1e-3, kept

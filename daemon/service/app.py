@@ -99,6 +99,7 @@ class Daemon:
             config.mapping.mode if self.map_readonly_reason is None else "localisation")
         self._tracked: SavedPose | None = None  # the last pose tracked, to save
         self._saved: SavedPose | None = None  # the one saved last
+        self._site_tie = self._load_site_tie()  # the map frame in the site's map (ROS 2)
         self.supervisor = Supervisor(
             config.service.restart_backoff_initial_s, config.service.restart_backoff_max_s,
             on_event=self.publish_event, fault_summary_s=config.service.fault_summary_s,
@@ -429,6 +430,43 @@ class Daemon:
         query.reply(query.key_expr, api.result(place=request.place, x=request.x, y=request.y,
                                                yaw=request.yaw))
 
+    def _load_site_tie(self) -> SE2 | None:
+        """The map frame's pose in the site's map ([ros2] frame_id) stored with the map;
+        one stored for another frame name is not applied (said once)."""
+        tie = self.session.site_tie()
+        if tie is None:
+            return None
+        frame, T = tie
+        if frame != self.config.ros2.frame_id:
+            log.warning("the map is tied to a site frame %r, not [ros2] frame_id %r: "
+                        "ROS 2 poses are in placecell's own map frame", frame,
+                        self.config.ros2.frame_id)
+            return None
+        log.info("the map frame stands at %s in the site's %r (ROS 2 poses are there)", T, frame)
+        return T
+
+    def _tie_site(self, pose: SE2, source: str) -> None:
+        """The operator says where the robot is in the site's map while placecell tracks
+        it in its own: the tie of the two, stored with the map (design §11)."""
+        belief = self._belief
+        frame = self.mapper.map_frame
+        if belief is None or belief.state != "tracking" or belief.place_id not in frame \
+                or belief.pose_in_place is None:
+            log.warning("%s ignored: the map frame is tied to the site's map only while "
+                        "tracking (state %s)", source, None if belief is None else belief.state)
+            return
+        here = frame[belief.place_id].compose(SE2.of(belief.pose_in_place))
+        tie = pose.compose(here.inverse())  # T_site_map
+        try:
+            self.session.tie_site(self.config.ros2.frame_id, tie)
+        except PlacecellError as e:
+            log.warning("the tie to the site's map holds until the daemon stops: %s", e)
+        self._site_tie = tie
+        log.info("the map frame tied to the site's %r at %s (from %s)",
+                 self.config.ros2.frame_id, tie, source)
+        self.publish_event("site_tied", frame=self.config.ros2.frame_id, x=round(tie.x, 4),
+                           y=round(tie.y, 4), yaw=round(tie.yaw, 5), source=source)
+
     def _initial_pose(self, pose: SE2, covariance: np.ndarray, frame_id: str,
                       source: str | None = None) -> None:
         """A pose in the map frame from ROS 2 (``source``: /initialpose, rviz's 2D Pose
@@ -441,6 +479,14 @@ class Daemon:
             log.warning("%s in frame %r ignored: poses are set in %r", source, frame_id,
                         settings.frame_id)
             return
+        if self._site_tie is None and settings.tie_site_map:
+            self._tie_site(pose, source)
+            return
+        if self._site_tie is not None:  # from the site's map into placecell's
+            pose = self._site_tie.inverse().compose(pose)
+            c, s = math.cos(-self._site_tie.yaw), math.sin(-self._site_tie.yaw)
+            R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+            covariance = R @ covariance @ R.T
         frame = self.mapper.map_frame
         if localiser is None or not frame:
             log.warning("%s ignored: %s", source,
@@ -548,6 +594,8 @@ class Daemon:
         assert self._ros2 is not None and belief.covariance is not None
         odo = belief.odometry
         epoch_ns = belief.stamp_ns + time.time_ns() - time.monotonic_ns()
+        if self._site_tie is not None:  # every ROS 2 pose in the site's map
+            place, in_map = self._site_tie.compose(place), self._site_tie.compose(in_map)
         localiser = self.processing.localiser  # this is its thread: the frame just done
         tracker = None if localiser is None else localiser.tracker
         try:

@@ -33,6 +33,7 @@ from daemon.mapping.unmapped import UnmappedWatch
 from daemon.service.mapper import Link, Mapper, Seen
 from daemon.service.pipeline import holder_of
 from kernel.errors import PlacecellError
+from kernel.se2 import SE2
 from kernel.types import Odometry
 
 log = logging.getLogger(__name__)
@@ -161,6 +162,18 @@ class MappingSession:
         return [*segment_events(None, before, after, ends),
                 ("transition_added", {"source": "cycle", "x": round(m.x, 4),
                                       "y": round(m.y, 4), "yaw": round(m.yaw, 5), **ends})]
+
+    def site_tie(self) -> tuple[str, SE2] | None:
+        """The map frame's pose in a site's map (its frame name), if tied (design §11)."""
+        tie = self.mapper.store.site_tie()
+        return None if tie is None else (tie[0], SE2(*tie[1:]))
+
+    def tie_site(self, frame: str, T_site_map: SE2) -> None:
+        """Tie the map frame to a site's map ``frame`` (nav2's occupancy map): the map
+        frame's pose in it, stored with the map (in either mode: no place changes).
+        PlacecellError when the map file cannot be written."""
+        with self._lock:
+            self.mapper.store.save_site_tie(frame, T_site_map.x, T_site_map.y, T_site_map.yaw)
 
     # ------------------------------------------------------------ the autopilot
     def wants_place(self, belief: Belief, latest_odometry: Odometry | None,

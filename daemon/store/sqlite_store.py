@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
 import logging
 import os
 import sqlite3
@@ -224,6 +225,25 @@ class MapStore:
     def meta(self, key: str) -> str | None:
         row = self._one("SELECT value FROM meta WHERE key = ?", (key,))
         return None if row is None else str(row[0])
+
+    def site_tie(self) -> tuple[str, float, float, float] | None:
+        """The tie of the map frame to a site's map (frame, x, y, yaw of the map frame in
+        it; design §11), or None: not tied. A malformed value reads as not tied."""
+        text = self.meta("site_tie")
+        try:
+            d = json.loads(text) if text else None
+            return None if d is None else (str(d["frame"]), float(d["x"]), float(d["y"]),
+                                           float(d["yaw"]))
+        except (ValueError, KeyError, TypeError):
+            return None
+
+    def save_site_tie(self, frame: str, x: float, y: float, yaw: float) -> None:
+        """Store the map frame's pose in the site's map ``frame`` (replacing any)."""
+        self._writable()
+        value = json.dumps({"frame": frame, "x": float(x), "y": float(y), "yaw": float(yaw)})
+        with self._lock, _transaction(self._db):
+            self._db.execute("INSERT OR REPLACE INTO meta(key, value) VALUES ('site_tie', ?)",
+                             (value,))
 
     def summaries(self) -> list[PlaceSummary]:
         rows = self._all("SELECT id, label, created_unix_s, landmark_count, background_lrp "
