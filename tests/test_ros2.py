@@ -261,6 +261,28 @@ def _check_tf(records: list[dict], tokens: list[str], samples: list[dict]) -> No
     assert max(aheads) > 0.5, aheads  # the transform tolerance: stamps ahead of now
 
 
+INITIAL_POSE_KEY = (f"0/initialpose/geometry_msgs::msg::dds_::PoseWithCovarianceStamped_/"
+                    f"{JAZZY.hash_rihs01(POSE_TYPE)}")
+
+
+def initial(x: float, y: float, yaw: float, frame: str) -> bytes:
+    """A PoseWithCovarianceStamped as rviz's 2D Pose Estimate sends it, by rosbags."""
+    t = JAZZY.types
+    cov = np.zeros(36)
+    cov[0] = cov[7] = 0.02 ** 2
+    cov[35] = 0.02 ** 2
+    msg = t[POSE_TYPE](
+        header=t["std_msgs/msg/Header"](
+            stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id=frame),
+        pose=t["geometry_msgs/msg/PoseWithCovariance"](
+            pose=t["geometry_msgs/msg/Pose"](
+                position=t["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+                orientation=t["geometry_msgs/msg/Quaternion"](
+                    x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))),
+            covariance=cov))
+    return bytes(JAZZY.serialize_cdr(msg, POSE_TYPE))
+
+
 @pytest.mark.timeout(240)
 def test_an_initial_pose_from_ros2_moves_the_pose_there(tmp_path: Path,
                                                       office_map: OfficeMap) -> None:
@@ -271,27 +293,8 @@ def test_an_initial_pose_from_ros2_moves_the_pose_there(tmp_path: Path,
     config, port = write_config(tmp_path, {
         "robot": {"name": "rosbot"}, "mapping": {"mode": "localisation"},
         "sim": {"start_pose": [4.75, 10.15, 0.4]}, "ros2": {"enabled": True}})
-    t = JAZZY.types
     poses: list[dict] = []
     events: list[dict] = []
-
-    def initial(x: float, y: float, yaw: float, frame: str) -> bytes:
-        cov = np.zeros(36)
-        cov[0] = cov[7] = 0.02 ** 2
-        cov[35] = 0.02 ** 2
-        msg = t[POSE_TYPE](
-            header=t["std_msgs/msg/Header"](
-                stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id=frame),
-            pose=t["geometry_msgs/msg/PoseWithCovariance"](
-                pose=t["geometry_msgs/msg/Pose"](
-                    position=t["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
-                    orientation=t["geometry_msgs/msg/Quaternion"](
-                        x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))),
-                covariance=cov))
-        return bytes(JAZZY.serialize_cdr(msg, POSE_TYPE))
-
-    key = (f"0/initialpose/geometry_msgs::msg::dds_::PoseWithCovarianceStamped_/"
-           f"{JAZZY.hash_rihs01(POSE_TYPE)}")
     with running_daemon(config):
         session = client_session(port)
         try:
@@ -303,7 +306,7 @@ def test_an_initial_pose_from_ros2_moves_the_pose_there(tmp_path: Path,
                             120), poses[-1:]
             now = next(p["map"] for p in reversed(poses) if p["map"])
             target = (now["x"] + 0.3, now["y"] - 0.1, now["yaw"] + 0.2)
-            publisher = session.declare_publisher(key)
+            publisher = session.declare_publisher(INITIAL_POSE_KEY)
             publisher.put(initial(*target, "odom"))  # another frame: ignored
             publisher.put(initial(*target, "map"))
             assert wait_for(lambda: any(e["event"] == "pose_set" for e in events), 30), events
@@ -393,7 +396,6 @@ def test_the_first_initial_pose_ties_the_map_to_the_site_and_ros_poses_follow(
     poses: list[dict] = []
     ros: list[tuple[float, float, float]] = []
     events: list[dict] = []
-    t = JAZZY.types
     with running_daemon(config):
         session = client_session(port)
         try:
@@ -410,19 +412,7 @@ def test_the_first_initial_pose_ties_the_map_to_the_site_and_ros_poses_follow(
                             120), poses[-1:]
             m = next(p["map"] for p in reversed(poses) if p["map"])
             here = site.compose(SE2(m["x"], m["y"], m["yaw"]))  # the robot in the site's map
-            cov = np.zeros(36)
-            msg = t[POSE_TYPE](
-                header=t["std_msgs/msg/Header"](
-                    stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="map"),
-                pose=t["geometry_msgs/msg/PoseWithCovariance"](
-                    pose=t["geometry_msgs/msg/Pose"](
-                        position=t["geometry_msgs/msg/Point"](x=here.x, y=here.y, z=0.0),
-                        orientation=t["geometry_msgs/msg/Quaternion"](
-                            x=0.0, y=0.0, z=math.sin(here.yaw / 2), w=math.cos(here.yaw / 2))),
-                    covariance=cov))
-            key = (f"0/initialpose/geometry_msgs::msg::dds_::PoseWithCovarianceStamped_/"
-                   f"{JAZZY.hash_rihs01(POSE_TYPE)}")
-            session.put(key, bytes(JAZZY.serialize_cdr(msg, POSE_TYPE)))
+            session.put(INITIAL_POSE_KEY, initial(here.x, here.y, here.yaw, "map"))
             assert wait_for(lambda: any(e["event"] == "site_tied" for e in events), 30), events
             tied = next(e for e in events if e["event"] == "site_tied")
             heard_before = len(ros)
