@@ -137,6 +137,7 @@ class Ros2Base:
         self._move_done = False
         self._fault = False
         self._running = False
+        self._closing = threading.Event()  # wakes the control loop to end it
         self._thread: threading.Thread | None = None
         self._counts = {"samples": 0, "malformed": 0, "commands": 0, "watchdog_stops": 0}
 
@@ -156,6 +157,7 @@ class Ros2Base:
             raise DeviceInitError(f"ros2 base: cannot open a zenoh session to "
                                   f"{list(s.connect)}: {e}") from e
         self._running = True
+        self._closing.clear()
         self._thread = threading.Thread(target=self._control_loop, name="ros2-base",
                                         daemon=True)
         self._thread.start()
@@ -163,8 +165,7 @@ class Ros2Base:
     def close(self) -> None:
         self._running = False
         if self._thread is not None:
-            with self._cond:
-                self._cond.notify_all()
+            self._closing.set()
             self._thread.join(timeout=2.0)
             self._thread = None
         if self._cmd is not None:
@@ -290,12 +291,14 @@ class Ros2Base:
     # ---------------------------------------------------------------- control
     def _control_loop(self) -> None:
         period = 1.0 / self._settings.control_rate_hz
+        next_tick = time.monotonic()
         while self._running:
             command = self._control_step(time.monotonic())
             if command is not None:
                 self._publish(*command)
-            with self._cond:
-                self._cond.wait(period)
+            # At control_rate_hz (odometry samples do not wake it), late ticks not caught up.
+            next_tick = max(next_tick + period, time.monotonic())
+            self._closing.wait(max(0.0, next_tick - time.monotonic()))
 
     def _control_step(self, now: float) -> tuple[float, float, float] | None:
         """The Twist to publish now (None: nothing): the move or velocity under way, or a
