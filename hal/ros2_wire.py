@@ -202,8 +202,8 @@ class ServiceServer:
     """One rmw_zenoh service server: a queryable (complete) on the service key and an
     ``SS`` liveliness token. Each request's attachment (sequence number, time, client GID)
     is echoed in the reply with a new time; ``handle(request) -> response`` works on the
-    decoded messages; a request that does not decode gets no reply (logged by the caller's
-    ``on_error``)."""
+    decoded messages; a request that does not decode gets an error reply naming what is
+    wrong (and the caller's ``on_error``)."""
 
     def __init__(self, session: zenoh.Session, domain_id: int, node_id: int,
                  entity_id: int, node_name: str, service: str, service_type: str,
@@ -224,7 +224,9 @@ class ServiceServer:
             sequence, _, client = zenoh.ext.z_deserialize(
                 tuple[zenoh.ext.Int64, zenoh.ext.Int64, bytes], query.attachment)
         except Exception as e:  # noqa: BLE001 - a request from someone else's node
-            self._on_error(f"{self.key}: a request that is not a {self._type}: {e}")
+            why = f"{self.key}: a request that is not a {self._type}: {e}"
+            self._on_error(why)
+            query.reply_err(why)  # the client hears what is wrong, not a timeout
             return
         response = self._handle(request)
         query.reply(self.key, bytes(TYPESTORE.serialize_cdr(response, f"{self._type}_Response")),

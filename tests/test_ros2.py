@@ -373,6 +373,12 @@ def _amcl_services(session: zenoh.Session, pose_request: bytes, poses: list[dict
                  set_pose_hash, pose_request, 41) == EMPTY_CDR
     assert wait_for(lambda: any(e["event"] == "pose_set" and e["source"] == "/set_initial_pose"
                                 for e in events), 30), events
+    # A request without rmw_zenoh's attachment is answered with an error saying so.
+    bad = list(session.get(f"0/reinitialize_global_localization/std_srvs::srv::dds_::Empty_/"
+                           f"{EMPTY_HASH}", payload=EMPTY_CDR,
+                           target=zenoh.QueryTarget.ALL_COMPLETE, timeout=10.0))
+    assert len(bad) == 1 and bad[0].err is not None, bad
+    assert "no attachment" in bad[0].err.payload.to_string(), bad[0].err.payload.to_string()
     called_ns = time.monotonic_ns()
     assert _call(session, "reinitialize_global_localization", "std_srvs::srv::dds_::Empty_",
                  EMPTY_HASH, EMPTY_CDR, 42) == EMPTY_CDR

@@ -253,7 +253,7 @@ class Ros2PosePublisher:
             return _TYPESTORE.types[f"{SET_POSE_SRV}_Response"]()
 
         def refused(message: str) -> None:
-            log.warning("%s; no reply", message)
+            log.warning("%s; answered with an error", message)
 
         self._subscribers += [
             wire.ServiceServer(self._session, s.domain_id, self._node_id, 5, NODE_NAME,
