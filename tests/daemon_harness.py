@@ -17,6 +17,8 @@ from typing import Any
 
 import zenoh
 
+from tests.api_schema import check
+
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_CONFIG = REPO / "config" / "placecell.toml"
 
@@ -157,3 +159,22 @@ def busy_loops(n: int = 2) -> Iterator[None]:
         for p in procs:
             p.kill()
             p.wait(10)
+
+
+def ctl(config: Path, *args: str, timeout: float = 240.0) -> subprocess.CompletedProcess[str]:
+    """placecellctl in its own process against the daemon ``config`` describes."""
+    return subprocess.run([venv_bin("placecellctl"), "--config", str(config), *args],
+                          cwd=REPO, capture_output=True, text=True, timeout=timeout)
+
+
+def wait_ready(config: Path, timeout_s: float, what: str) -> None:
+    """Until ``status`` says every component runs and frames and odometry flow (each
+    status checked against its schema); AssertionError ``what`` after ``timeout_s``."""
+    def ready() -> bool:
+        st = ctl(config, "status", "--json", timeout=30)
+        if st.returncode != 0:
+            return False
+        status = check(json.loads(st.stdout))
+        return bool(status["healthy"]) and status["rates"]["frames_hz"] > 0 \
+            and status["rates"]["odometry_hz"] > 0
+    assert wait_for(ready, timeout_s, interval_s=0.5), what

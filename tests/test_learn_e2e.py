@@ -25,12 +25,14 @@ from tests.conftest import OfficeMap
 from tests.daemon_harness import (
     REPO,
     client_session,
+    ctl,
     free_port,
     listening_session,
     read_json_lines,
     running_daemon,
     venv_bin,
     wait_for,
+    wait_ready,
     write_config,
 )
 
@@ -89,11 +91,6 @@ class Truth:
         return max(math.dist(recent[0][1:3], p[1:3]) for p in recent) < 1e-4
 
 
-def _ctl(config: Path, *args: str, timeout: float = 240.0) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([venv_bin("placecellctl"), "--config", str(config), *args],
-                          cwd=REPO, capture_output=True, text=True, timeout=timeout)
-
-
 def _learn_popen(config: Path, label: str) -> subprocess.Popen[str]:
     return subprocess.Popen([venv_bin("placecellctl"), "--config", str(config), "learn",
                              "--label", label, "--json"], cwd=REPO, stdout=subprocess.PIPE,
@@ -124,19 +121,8 @@ def _start(tmp: Path, drift: dict[str, float] | None) -> tuple[Path, int, Truth]
     return config, port, truth
 
 
-def _wait_ready(config: Path) -> None:
-    def ready() -> bool:  # frames and odometry flowing, every component running
-        st = _ctl(config, "status", "--json", timeout=30)
-        if st.returncode != 0:
-            return False
-        status = check(json.loads(st.stdout))
-        return bool(status["healthy"]) and status["rates"]["frames_hz"] > 0 \
-            and status["rates"]["odometry_hz"] > 0
-    assert wait_for(ready, 90, interval_s=0.5), "the daemon never delivered frames"
-
-
 def _learn_two(config: Path, truth: Truth) -> tuple[dict[str, Any], dict[str, Any]]:
-    first = _ctl(config, "learn", "--label", "dock", "--json")
+    first = ctl(config, "learn", "--label", "dock", "--json")
     assert first.returncode == 0, first.stderr
     replies = _lines(first.stdout)
     progress = [r for r in replies if r["kind"] == "progress"]
@@ -154,11 +140,11 @@ def _learn_two(config: Path, truth: Truth) -> tuple[dict[str, Any], dict[str, An
     second = _learn_popen(config, "door")
 
     def learning() -> bool:  # the second learn's job is running in the daemon
-        st = _ctl(config, "status", "--json", timeout=30)
+        st = ctl(config, "status", "--json", timeout=30)
         return st.returncode == 0 and json.loads(st.stdout)["job"] is not None
 
     assert wait_for(learning, 60, 0.2), "the second learn never started"
-    refused = _ctl(config, "learn", "--label", "intruder")
+    refused = ctl(config, "learn", "--label", "intruder")
     assert refused.returncode == 4, refused.stderr
     assert "being learned already" in refused.stderr
     out, err = second.communicate(timeout=240)
@@ -172,15 +158,15 @@ def _learn_two(config: Path, truth: Truth) -> tuple[dict[str, Any], dict[str, An
 
 def _localisation_mode_refuses_learning(config: Path) -> None:
     """cmd/mode (design §11): in localisation mode the map is read-only."""
-    assert check(json.loads(_ctl(config, "mode", "--json").stdout))["mode"] == "mapping"
-    switched = _ctl(config, "mode", "localisation", "--json")
+    assert check(json.loads(ctl(config, "mode", "--json").stdout))["mode"] == "mapping"
+    switched = ctl(config, "mode", "localisation", "--json")
     assert switched.returncode == 0
     assert check(json.loads(switched.stdout))["mode"] == "localisation"
-    refused = _ctl(config, "learn", "--label", "nope")
+    refused = ctl(config, "learn", "--label", "nope")
     assert refused.returncode == 4 and "localisation mode" in refused.stderr, refused.stderr
-    bad = _ctl(config, "mode", "surveying")
+    bad = ctl(config, "mode", "surveying")
     assert bad.returncode == 2  # argparse: not a mode
-    back = _ctl(config, "mode", "mapping", "--json")
+    back = ctl(config, "mode", "mapping", "--json")
     assert back.returncode == 0 and check(json.loads(back.stdout))["mode"] == "mapping"
 
 
@@ -188,7 +174,7 @@ def _place_and_panorama(config: Path, port: int, place_id: int) -> None:
     """map/place/<id> and map/place/<id>/panorama: a PNG of the reference panorama with
     its landmarks drawn."""
     png_path = config.with_name("dock.png")
-    shown = _ctl(config, "place", str(place_id), "--panorama", str(png_path), "--json")
+    shown = ctl(config, "place", str(place_id), "--panorama", str(png_path), "--json")
     assert shown.returncode == 0, shown.stderr
     info = check(json.loads(shown.stdout))
     assert info["label"] == "dock" and len(info["landmarks"]) == 16
@@ -197,7 +183,7 @@ def _place_and_panorama(config: Path, port: int, place_id: int) -> None:
     assert image is not None and image.shape == (2 * 120, 2 * 720, 3)
     # The landmarks are outlined in yellow: some pixels are exactly (0, 255, 255).
     assert int(np.all(image == (0, 255, 255), axis=2).sum()) > 16 * 60
-    missing = _ctl(config, "place", "99")
+    missing = ctl(config, "place", "99")
     assert missing.returncode == 4 and "not in the map" in missing.stderr
     session = client_session(port)
     try:
@@ -225,7 +211,7 @@ def test_learn_two_places_then_track_from_one_to_the_other(tmp_path: Path) -> No
     (with the default odometry drift) to the second, as a separate subscriber sees it."""
     config, port, truth = _start(tmp_path, NO_DRIFT)
     with running_daemon(config):
-        _wait_ready(config)
+        wait_ready(config, 90, "the daemon never delivered frames")
         watcher = client_session(port)
         try:
             published = Messages(watcher, "e2e")
@@ -242,7 +228,7 @@ def test_learn_two_places_then_track_from_one_to_the_other(tmp_path: Path) -> No
         assert math.hypot(true.x, true.y) > 2.0
         assert math.hypot(measured.x - true.x, measured.y - true.y) <= 0.02
         assert abs(math.degrees(math.remainder(measured.yaw - true.yaw, 2 * math.pi))) <= 0.5
-        places = _ctl(config, "places", "--json")
+        places = ctl(config, "places", "--json")
         listed = check(json.loads(places.stdout))["places"]
         assert [p["label"] for p in listed] == ["dock", "door"]
     with MapStore.open(tmp_path / "map.db", None, readonly=True) as store:
@@ -271,14 +257,14 @@ def _track_dock_to_door(tmp: Path, references: dict[int, SE2], dock: int, door: 
     config, _ = write_config(tmp, {"robot": {"name": "e2e"}, "sim": {
         "scenario": str(scenario), "truth_out": str(truth.path)}})
     with running_daemon(config) as daemon:
-        _wait_ready(config)
-        before = _ctl(config, "pose", "--json", timeout=30)
+        wait_ready(config, 90, "the daemon never delivered frames")
+        before = ctl(config, "pose", "--json", timeout=30)
         assert before.returncode == 0, before.stderr
         # On a map without a pose it localises by itself (design §9); set_pose overrides.
         assert _lines(before.stdout)[-1]["state"] in ("relocalising", "tracking")
-        unknown = _ctl(config, "set-pose", "0", "0", "0", "--place", "99")
+        unknown = ctl(config, "set-pose", "0", "0", "0", "--place", "99")
         assert unknown.returncode == 4 and "not in the map" in unknown.stderr, unknown.stderr
-        set_pose = _ctl(config, "set-pose", "0", "0", "0", "--place", str(dock),
+        set_pose = ctl(config, "set-pose", "0", "0", "0", "--place", str(dock),
                         "--sigma-xy", "0.05", "--json")
         assert set_pose.returncode == 0, set_pose.stderr
         set_at = time.monotonic_ns()
@@ -412,7 +398,7 @@ def test_default_drift_transitions_inside_2_sigma(tmp_path: Path, office_map: Of
 
 def _abort_stops_the_robot(config: Path, truth: Truth) -> None:
     """cmd/abort while the robot drives its cross: stopped within 0.5 s, nothing stored."""
-    before = len(check(json.loads(_ctl(config, "places", "--json").stdout))["places"])
+    before = len(check(json.loads(ctl(config, "places", "--json").stdout))["places"])
     third = _learn_popen(config, "never")
     assert third.stdout is not None
     for line in third.stdout:
@@ -420,7 +406,7 @@ def _abort_stops_the_robot(config: Path, truth: Truth) -> None:
             break
     start = truth.samples()[-1][1:3]  # well into the first arm: 0.1 m along it
     assert wait_for(lambda: math.dist(truth.samples()[-1][1:3], start) > 0.1, 30, 0.02)
-    abort = _ctl(config, "abort", "--json")
+    abort = ctl(config, "abort", "--json")
     assert abort.returncode == 0, abort.stderr
     received_ns = _lines(abort.stdout)[-1]["received_ns"]
     out, err = third.communicate(timeout=60)
@@ -430,7 +416,7 @@ def _abort_stops_the_robot(config: Path, truth: Truth) -> None:
     after = [p for p in truth.samples() if p[0] >= received_ns + 500_000_000]
     assert max(math.dist(after[0][1:3], p[1:3]) for p in after) < 1e-4, \
         "the robot still moved 0.5 s after the abort"
-    places = check(json.loads(_ctl(config, "places", "--json").stdout))["places"]
+    places = check(json.loads(ctl(config, "places", "--json").stdout))["places"]
     assert len(places) == before
 
 
@@ -464,11 +450,11 @@ def test_learning_is_refused_with_the_reason(tmp_path: Path, overrides: dict[str
                                              why: str) -> None:
     config, _ = write_config(tmp_path, overrides)
     with running_daemon(config):
-        _wait_ready(config)
-        refused = _ctl(config, "learn", "--label", "nope", timeout=60)
+        wait_ready(config, 90, "the daemon never delivered frames")
+        refused = ctl(config, "learn", "--label", "nope", timeout=60)
         assert refused.returncode == 4, (refused.stdout, refused.stderr)
         assert why in refused.stderr
-        places = _ctl(config, "places", "--json")
+        places = ctl(config, "places", "--json")
         assert json.loads(places.stdout)["places"] == []
 
 
@@ -489,7 +475,7 @@ def test_make_run_learns_places_on_its_own_and_tracks_within_two_minutes(
                 stderr=subprocess.STDOUT, text=True)
 
         def places() -> list[dict[str, Any]]:
-            out = _ctl(config, "places", "--json", timeout=30)
+            out = ctl(config, "places", "--json", timeout=30)
             return list(check(json.loads(out.stdout))["places"]) if out.returncode == 0 \
                 else []
 

@@ -25,10 +25,12 @@ from tests.api_schema import check
 from tests.daemon_harness import (
     REPO,
     client_session,
+    ctl,
     free_port,
     running_daemon,
     venv_bin,
     wait_for,
+    wait_ready,
     write_config,
 )
 
@@ -118,11 +120,6 @@ def _at_rest(path: Path) -> bool:
                                         (rows[-1]["x"], rows[-1]["y"])) < 1e-3
 
 
-def _ctl(config: Path, *args: str, timeout: float = 240.0) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([venv_bin("placecellctl"), "--config", str(config), *args],
-                          cwd=REPO, capture_output=True, text=True, timeout=timeout)
-
-
 @pytest.mark.timeout(420)
 def test_a_ros2_differential_robot_learns_a_place_through_its_topics(tmp_path: Path) -> None:
     robot_port = free_port()
@@ -144,19 +141,12 @@ def test_a_ros2_differential_robot_learns_a_place_through_its_topics(tmp_path: P
     lock = threading.Lock()
     try:
         with running_daemon(config) as proc:
-            def ready() -> bool:  # images and odometry arriving over the ROS topics
-                st = _ctl(config, "status", "--json", timeout=30)
-                if st.returncode != 0:
-                    return False
-                status = check(json.loads(st.stdout))
-                return bool(status["healthy"]) and status["rates"]["frames_hz"] > 0 \
-                    and status["rates"]["odometry_hz"] > 0
-            assert wait_for(ready, 120, interval_s=0.5), "no frames or odometry from ROS 2"
+            wait_ready(config, 120, "no frames or odometry from ROS 2")
 
-            learned = _ctl(config, "learn", "--label", "dock", "--json")
+            learned = ctl(config, "learn", "--label", "dock", "--json")
             assert learned.returncode == 0, (learned.stdout[-2000:], learned.stderr[-2000:])
             last = check(json.loads(learned.stdout.splitlines()[-1]))
-            assert last.get("place", {}).get("label") == "dock" or "dock" in learned.stdout
+            assert last["kind"] == "result" and last["place"]["label"] == "dock", last
 
             session = client_session(port)
             try:
