@@ -147,6 +147,12 @@ def ros_time(stamp_ns: int) -> Any:
                                                          nanosec=stamp_ns % 1_000_000_000)
 
 
+def monotonic_of(ros_stamp_ns: int) -> int:
+    """A ROS stamp (ns since the UNIX epoch) on the monotonic clock the daemon stamps
+    with, by the offset of the two clocks now: a robot's stamps keep their spacing."""
+    return ros_stamp_ns - (time.time_ns() - time.monotonic_ns())
+
+
 def stamp_of(ros_time_msg: Any) -> int:
     """ns since the UNIX epoch of a builtin_interfaces/Time."""
     return int(ros_time_msg.sec) * 1_000_000_000 + int(ros_time_msg.nanosec)

@@ -14,13 +14,10 @@ import threading
 import time
 from typing import Any
 
-import numpy as np
 import zenoh
 
 from hal import ros2_wire as wire
-
-ODOMETRY = "nav_msgs/msg/Odometry"
-TWIST = "geometry_msgs/msg/Twist"
+from hal.base.ros2 import ODOMETRY, TWIST, odometry_message
 
 
 class Ros2DiffDriveRobot:
@@ -72,23 +69,8 @@ class Ros2DiffDriveRobot:
             time.sleep(max(0.0, period - (time.monotonic() - now)))
 
     def _publish(self, pose: tuple[float, float, float]) -> None:
-        t = wire.TYPESTORE.types
-        x, y, yaw = pose
-        msg = t[ODOMETRY](
-            header=t["std_msgs/msg/Header"](stamp=wire.ros_time(time.time_ns()),
-                                            frame_id="odom"),
-            child_frame_id="base_link",
-            pose=t["geometry_msgs/msg/PoseWithCovariance"](
-                pose=t["geometry_msgs/msg/Pose"](
-                    position=t["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
-                    orientation=wire.quaternion(yaw)),
-                covariance=np.zeros(36)),
-            twist=t["geometry_msgs/msg/TwistWithCovariance"](
-                twist=t[TWIST](linear=t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
-                               angular=t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)),
-                covariance=np.zeros(36)))
         with contextlib.suppress(Exception):  # zenoh shutting down
-            self._odom.put_message(msg)
+            self._odom.put_message(odometry_message(*pose, time.time_ns()))
 
     def close(self) -> None:
         self._running = False

@@ -32,6 +32,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import zenoh
 
 from hal.base.base import BaseInfo, BaseStatus
@@ -40,8 +41,11 @@ from hal.ros2_wire import (
     TYPESTORE,
     Publisher,
     mangled_type,
+    monotonic_of,
     node_token,
     open_session,
+    quaternion,
+    ros_time,
     stamp_of,
     yaw_of,
 )
@@ -68,6 +72,22 @@ def decode_odometry(payload: bytes) -> tuple[float, float, float, int]:
     if not all(math.isfinite(v) for v in (p.x, p.y, yaw)):
         raise ValueError(f"a {ODOMETRY} whose pose is not finite")
     return float(p.x), float(p.y), yaw, stamp_of(msg.header.stamp)
+
+
+def odometry_message(x: float, y: float, yaw: float, stamp_ns: int) -> Any:
+    """A nav_msgs/Odometry of a pose in the plane (odom -> base_link, ROS time), as a base
+    driver publishes it; twist and covariances zero (what the simulated bases send)."""
+    t = TYPESTORE.types
+    zeros = np.zeros(36)
+    return t[ODOMETRY](
+        header=t["std_msgs/msg/Header"](stamp=ros_time(stamp_ns), frame_id="odom"),
+        child_frame_id="base_link",
+        pose=t["geometry_msgs/msg/PoseWithCovariance"](
+            pose=t["geometry_msgs/msg/Pose"](
+                position=t["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+                orientation=quaternion(yaw)), covariance=zeros),
+        twist=t["geometry_msgs/msg/TwistWithCovariance"](twist=twist(0.0, 0.0, 0.0),
+                                                         covariance=zeros))
 
 
 def twist(vx: float, vy: float, w: float) -> Any:
@@ -199,10 +219,10 @@ class Ros2Base:
                 log.warning("%s: %s; dropped (reported once, counted in malformed)",
                             self._settings.odom_topic, e)
             return
-        offset_ns = time.time_ns() - time.monotonic_ns()  # ROS time onto the monotonic clock
+        stamp_ns = monotonic_of(stamp_ns)  # ROS time onto the daemon's clock
         with self._cond:
             self._seq += 1
-            odo = Odometry(x, y, yaw, stamp_ns - offset_ns, self._seq)
+            odo = Odometry(x, y, yaw, stamp_ns, self._seq)
             self._samples.append(odo)
             self._latest, self._latest_arrival = odo, time.monotonic()
             self._counts["samples"] += 1

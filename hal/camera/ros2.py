@@ -24,7 +24,6 @@ import collections
 import contextlib
 import logging
 import threading
-import time
 from collections.abc import Mapping
 from typing import Any
 
@@ -34,7 +33,7 @@ import zenoh
 
 from hal.camera.base import CameraInfo, Frame
 from hal.camera.settings import Ros2CameraSettings
-from hal.ros2_wire import TYPESTORE, mangled_type, open_session, stamp_of
+from hal.ros2_wire import TYPESTORE, mangled_type, monotonic_of, open_session, stamp_of
 from kernel.errors import DeviceInitError, DeviceTimeoutError
 
 log = logging.getLogger(__name__)
@@ -144,13 +143,12 @@ class Ros2Camera:
         except ValueError as e:
             self._complain(str(e)[:60], f"{self._settings.topic}: {e}; dropped")
             return
-        # ROS time (the UNIX clock) onto the monotonic clock the daemon stamps with.
-        offset_ns = time.time_ns() - time.monotonic_ns()
+        stamp_ns = monotonic_of(stamp_ns)  # ROS time onto the daemon's clock
         with self._cond:
             self._seq += 1
             if self._frame is not None:
                 self._counts["skipped"] += 1
-            self._frame = Frame(image, stamp_ns - offset_ns, self._seq)
+            self._frame = Frame(image, stamp_ns, self._seq)
             self._stamps.append(stamp_ns)
             self._shape = image.shape
             self._counts["frames"] += 1

@@ -32,6 +32,7 @@ import zenoh
 from daemon import config as config_mod
 from daemon.service.ros2 import TF_QOS_KEYEXPR, TF_TYPE, tf_cdr
 from hal import ros2_wire as wire
+from hal.base.ros2 import ODOMETRY, TWIST, odometry_message
 from hal.sim.factory import build_sim_robot
 from hal.sim.robot import SimRobot
 from kernel.errors import CommandRejectedError
@@ -39,8 +40,6 @@ from kernel.se2 import SE2
 
 log = logging.getLogger(__name__)
 
-ODOMETRY = "nav_msgs/msg/Odometry"
-TWIST = "geometry_msgs/msg/Twist"
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED = "sensor_msgs/msg/CompressedImage"
 
@@ -100,24 +99,11 @@ class Ros2SimRobot:
             log.warning("cmd_vel: not a Twist: %s", e)
 
     def _odometry_loop(self) -> None:
-        t = wire.TYPESTORE.types
-        zeros = np.zeros(36)
-        v3 = t["geometry_msgs/msg/Vector3"]
         while not self._stop.is_set():
             for o in self.robot.wait_odometry(0.1):
-                msg = t[ODOMETRY](
-                    header=t["std_msgs/msg/Header"](
-                        stamp=wire.ros_time(o.stamp_ns + self._offset_ns), frame_id="odom"),
-                    child_frame_id="base_link",
-                    pose=t["geometry_msgs/msg/PoseWithCovariance"](
-                        pose=t["geometry_msgs/msg/Pose"](
-                            position=t["geometry_msgs/msg/Point"](x=o.x, y=o.y, z=0.0),
-                            orientation=wire.quaternion(o.yaw)), covariance=zeros),
-                    twist=t["geometry_msgs/msg/TwistWithCovariance"](
-                        twist=t[TWIST](linear=v3(x=0.0, y=0.0, z=0.0),
-                                       angular=v3(x=0.0, y=0.0, z=0.0)), covariance=zeros))
                 with contextlib.suppress(Exception):  # zenoh shutting down
-                    self._odom.put_message(msg)
+                    self._odom.put_message(odometry_message(o.x, o.y, o.yaw,
+                                                            o.stamp_ns + self._offset_ns))
                     self._tf.put(tf_cdr([("odom", "base_link", SE2(o.x, o.y, o.yaw),
                                           o.stamp_ns + self._offset_ns)]))
             at = self._command_at
