@@ -265,6 +265,14 @@ INITIAL_POSE_KEY = (f"0/initialpose/geometry_msgs::msg::dds_::PoseWithCovariance
                     f"{JAZZY.hash_rihs01(POSE_TYPE)}")
 
 
+def _follow(session: zenoh.Session, poses: list[dict], events: list[dict]) -> None:
+    """The daemon's own pose and events (robot rosbot), appended as they come."""
+    session.declare_subscriber("placecell/rosbot/pose", lambda s: poses.append(
+        json.loads(s.payload.to_bytes())))
+    session.declare_subscriber("placecell/rosbot/events", lambda s: events.append(
+        json.loads(s.payload.to_bytes())))
+
+
 def initial(x: float, y: float, yaw: float, frame: str) -> bytes:
     """A PoseWithCovarianceStamped as rviz's 2D Pose Estimate sends it, by rosbags."""
     t = JAZZY.types
@@ -298,10 +306,7 @@ def test_an_initial_pose_from_ros2_moves_the_pose_there(tmp_path: Path,
     with running_daemon(config):
         session = client_session(port)
         try:
-            session.declare_subscriber("placecell/rosbot/pose", lambda s: poses.append(
-                json.loads(s.payload.to_bytes())))
-            session.declare_subscriber("placecell/rosbot/events", lambda s: events.append(
-                json.loads(s.payload.to_bytes())))
+            _follow(session, poses, events)
             assert wait_for(lambda: any(p["state"] == "tracking" and p["map"] for p in poses),
                             120), poses[-1:]
             now = next(p["map"] for p in reversed(poses) if p["map"])
@@ -405,10 +410,7 @@ def test_the_first_initial_pose_ties_the_map_to_the_site_and_ros_poses_follow(
     with running_daemon(config):
         session = client_session(port)
         try:
-            session.declare_subscriber("placecell/rosbot/pose", lambda s: poses.append(
-                json.loads(s.payload.to_bytes())))
-            session.declare_subscriber("placecell/rosbot/events", lambda s: events.append(
-                json.loads(s.payload.to_bytes())))
+            _follow(session, poses, events)
 
             def heard(sample: zenoh.Sample) -> None:
                 pose, _, _ = ros2.decode_pose(sample.payload.to_bytes())

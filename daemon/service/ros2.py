@@ -66,12 +66,8 @@ _TYPESTORE = wire.TYPESTORE
 log = logging.getLogger(__name__)
 
 # The rmw_zenoh names and wire helpers (hal/ros2_wire.py), with this node's defaults.
-mangle, mangled_type, gid, attachment = wire.mangle, wire.mangled_type, wire.gid, \
-    wire.attachment
-
-
-def type_hash(msg_type: str) -> str:
-    return wire.type_hash(msg_type)
+mangle, mangled_type, gid, attachment, type_hash = wire.mangle, wire.mangled_type, \
+    wire.gid, wire.attachment, wire.type_hash
 
 
 def topic_key(domain_id: int, topic: str, msg_type: str = MSG_TYPE) -> str:
