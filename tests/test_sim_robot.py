@@ -96,6 +96,21 @@ def test_kidnap_moves_truth_not_odometry() -> None:
     assert robot.odometry_pose() == odo_before
 
 
+def test_kept_truth_answers_at_a_step_stamp() -> None:
+    """truth_at: the true and odometry poses of the kept step nearest a stamp, nothing for
+    a stamp older than what is kept or when nothing is."""
+    robot = build_sim_robot(lockstep_config())
+    assert robot.truth_at(0) is None  # nothing kept yet
+    robot.keep_truth(1.0)
+    robot.velocity(0.2, 0.0, 0.0)
+    robot.advance_to(int(3e9))
+    stamp, pose, odo = robot.truth_at(int(2.5e9) + 3_000_000) or (0, (), ())
+    assert stamp == int(2.5e9)  # the 20 ms step nearest
+    assert pose[0] == pytest.approx(robot.true_pose()[0] - 0.1, abs=0.01)
+    assert odo[0] == pytest.approx(robot.odometry_pose()[0] - 0.1, abs=0.01)
+    assert robot.truth_at(int(1.5e9)) is None  # older than the second kept
+
+
 def _final_odometry_error(seed: int) -> tuple[float, float]:
     scenario = load_scenario(REPO / "config" / "scenarios" / "loop-4laps.toml")
     robot = build_sim_robot(lockstep_config(seed=seed), scenario)

@@ -13,6 +13,8 @@ error, a heading bias per metre, and random walks per square-root metre.
 
 from __future__ import annotations
 
+import bisect
+import collections
 import math
 import threading
 import time
@@ -78,6 +80,9 @@ class SimRobot:
         self._move_done_at_ns: int | None = None  # when the last commanded move ended
         self._autopilot_released = False  # resumed after a command: no start delay
         self._truth_out: TextIO | None = None
+        # (stamp, true pose, odometry pose) of the last steps, for truth_at (keep_truth).
+        self._history: collections.deque[tuple[int, tuple[float, float, float],
+                                               tuple[float, float, float]]] | None = None
         self._samples: list[Odometry] = []
         self._odo_seq = 0
         self._frame_seq = 0
@@ -89,6 +94,26 @@ class SimRobot:
         """Append the true pose at every simulation step to ``path`` (JSON lines with the
         stamps odometry and frames carry): for evaluators and tests, never the method."""
         self._truth_out = open(path, "a", encoding="utf-8", buffering=1)  # noqa: SIM115
+
+    def keep_truth(self, seconds: float) -> None:
+        """Keep the true and odometry poses of the last ``seconds`` of steps, for
+        ``truth_at`` (an evaluator in another process judging a frame it received late)."""
+        with self._lock:
+            self._history = collections.deque(
+                maxlen=max(2, int(seconds * 1e9 / self._dt_ns)))
+
+    def truth_at(self, stamp_ns: int) -> tuple[int, tuple[float, float, float],
+                                               tuple[float, float, float]] | None:
+        """(stamp, true pose, odometry pose) of the kept step nearest ``stamp_ns`` (a stamp
+        frames and odometry carry); None when nothing is kept or it is older than that."""
+        with self._lock:
+            if not self._history or stamp_ns < self._history[0][0] - self._dt_ns:
+                return None
+            stamps = [h[0] for h in self._history]
+            k = bisect.bisect_left(stamps, stamp_ns)
+            near = min((i for i in (k - 1, k) if 0 <= i < len(stamps)),
+                       key=lambda i: abs(stamps[i] - stamp_ns))
+            return self._history[near]
 
     # ------------------------------------------------------------------ time
     def now_ns(self) -> int:
@@ -131,6 +156,8 @@ class SimRobot:
         self._odo_seq += 1
         ox, oy, oyaw = self._odo
         self._samples.append(Odometry(ox, oy, oyaw, self._stamp(self._t_ns), self._odo_seq))
+        if self._history is not None:
+            self._history.append((self._stamp(self._t_ns), self._pose, self._odo))
         if self._truth_out is not None:
             x, y, yaw = self._pose
             self._truth_out.write(f'{{"stamp_ns": {self._stamp(self._t_ns)}, "x": {x!r}, '

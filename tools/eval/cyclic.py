@@ -7,7 +7,9 @@ is told it stands there, and drives the loop once (``--loop-m`` round, a rectang
 the daemon's Localiser tracks it throughout, and as it comes back to the first place —
 which has no transition from the last — it closes the cycle (§7.1.3). Then ``--laps``
 laps follow, positioned by the same Localiser. Errors are against the simulator's truth
-in the current place's frame; the robot is holonomic and keeps its heading.
+in the current place's frame; the robot is holonomic and keeps its heading, and each leg
+is steered to its true end (as the simulated base's exact moves are; the ros2 base closes
+its moves on odometry).
 
 Metrics: ``mean_error_m``, ``p95_error_m``, ``final_error_m`` (over the laps after the
 mapping lap), ``odometry_final_error_m`` (dead reckoning over those laps),
@@ -41,10 +43,11 @@ from hal.sim.world import load_world
 from kernel.se2 import SE2
 from tools.eval import plots
 from tools.eval.lockstep import (
-    Run,
+    add_backends_argument,
     add_localisation_arguments,
     localisation_settings,
     lockstep_config,
+    open_run,
 )
 
 DRAWS_PLOTS = True  # world-frame paths (estimate, truth, odometry), error per frame
@@ -59,6 +62,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--start", type=float, nargs=3, metavar=("X", "Y", "YAW"),
                    help="where the loop starts (default: the world's start pose)")
     add_localisation_arguments(p)
+    add_backends_argument(p)
 
 
 def corners(loop_m: float, width_m: float) -> list[tuple[float, float]]:
@@ -99,12 +103,21 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     tracked: list[tuple[int, SE2, SE2]] = []  # (place, estimate in it, true pose) per frame
     paths: dict[str, list[tuple[float, float]]] = {"estimate": [], "truth": [],
                                                     "odometry": []}
-    with Run(cfg) as r:
+    with open_run(cfg, args.backends) as r:
         r.learn("place 1")  # tracking starts at each place learned
 
+        loop_origin = SE2.of(r.robot.true_pose())
+        aim = [0.0, 0.0]  # where the legs so far end, in the loop's frame
+
         def frames(dx: float, dy: float) -> Iterator[Belief]:
+            """One leg: the move from the true pose to the leg's end (the evaluator's
+            teleop steers by the truth: a base that closes its moves on drifting odometry,
+            such as the ros2 one, drives the same loop as the exact simulated one)."""
             nonlocal switches
-            for belief in r.drive(dx, dy, 0.0, args.speed):
+            aim[0], aim[1] = aim[0] + dx, aim[1] + dy
+            goal = loop_origin.compose(SE2(aim[0], aim[1], 0.0))
+            move = SE2.of(r.robot.true_pose()).between(goal)
+            for belief in r.drive(move.x, move.y, 0.0, args.speed):
                 if r.updates.closed_transition is not None:  # Run.step stored it
                     closed.append(r.updates.closed_transition)
                 switches += belief.switched_from is not None
@@ -168,7 +181,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "config": {"places": args.places, "laps": args.laps, "loop_m": args.loop_m,
                    "width_m": args.width_m, "speed_m_s": args.speed,
                    "sensor_model": settings.sensor_model, "particles": settings.particles,
-                   "drift": dataclasses.asdict(cfg.base.sim)},
+                   "drift": dataclasses.asdict(cfg.base.sim), "backends": args.backends},
         "metrics": {
             "mean_error_m": round(float(all_errors.mean()), 4),
             "p95_error_m": round(float(np.percentile(all_errors, 95)), 4),

@@ -108,6 +108,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                    "kinematics": args.kinematics,
                    "tbl": dataclasses.asdict(load(None).tbl)},
         "metrics": {
+            "mean_error_m": round(float(np.mean(errors)), 4),
             "median_error_m": round(float(np.median(errors)), 4),
             "max_error_m": round(float(np.max(errors)), 4),
             "max_error_within_1m_m": round(float(np.max(near_errors)), 4)

@@ -40,11 +40,13 @@ from daemon.vision.local_space import CAP_M, LocalSpace, match_many
 from daemon.vision.signature import signature, similarity
 from kernel.panorama import core_of, to_grey
 from kernel.se2 import SE2
+from tools.eval.lockstep import add_backends_argument
 from tools.eval.tour_map import Point, add_map_arguments, drive_to, mapped_run, right_place
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_map_arguments(p, places=50)
+    add_backends_argument(p)
 
 
 def _mapped_part(tour: list[Point], references: dict[int, SE2]) -> list[Point]:
@@ -138,4 +140,4 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         }, "config": {"places": args.places, "spacing_m": args.spacing, "speed": args.speed,
                       "sensor_model": args.sensor_model, "cue_margin": at,
                       "floor": getattr(args, "floor", None) or "fine",
-                      "local_margin": LOCAL_MARGIN}}
+                      "local_margin": LOCAL_MARGIN, "backends": args.backends}}

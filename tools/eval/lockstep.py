@@ -12,6 +12,7 @@ daemon's own code), and reads ground truth through the simulator's truth interfa
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import math
 import tempfile
@@ -19,7 +20,7 @@ import time
 import tomllib
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -44,6 +45,7 @@ from kernel.panorama import geometry_checksum
 from kernel.se2 import SE2
 from kernel.settings import as_dict, build
 from kernel.types import Frame
+from tools.eval.ros2_robot import RemoteSimRobot, ros2_robot
 
 # An evaluator's change to a raw frame before the localiser sees it (occlusion).
 FrameFilter = Callable[[np.ndarray], np.ndarray]
@@ -79,6 +81,27 @@ def with_kinematics(cfg: PlacecellConfig, kinematics: str) -> PlacecellConfig:
     return dataclasses.replace(cfg, base=dataclasses.replace(cfg.base, sim=sim_base))
 
 
+def add_backends_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--backends", choices=("sim", "ros2"), default="sim",
+                   help="ros2: the simulated robot as a ROS 2 robot in its own process, in "
+                        "real time, read and driven through the ros2 camera and base "
+                        "backends (tools/eval/ros2_robot.py)")
+
+
+@contextlib.contextmanager
+def open_run(cfg: PlacecellConfig, backends: str = "sim", map_path: Path | None = None
+             ) -> Iterator[Run]:
+    """A :class:`Run` of ``cfg`` on the sim backends in lock-step, or (``ros2``) on the
+    ros2 backends with the robot in its own process, in real time."""
+    if backends == "sim":
+        with Run(cfg, map_path=map_path) as run:
+            yield run
+        return
+    with ros2_robot(cfg) as (ros2_cfg, remote), \
+            Run(ros2_cfg, map_path=map_path, remote=remote) as run:
+        yield run
+
+
 def lockstep_config(seed: int, scenario: str = "", world: str = "",
                     start_pose: tuple[float, float, float] | None = None,
                     localisation: LocalisationSettings | None = None,
@@ -98,15 +121,20 @@ class Run:
     """One lock-step run; use as a context manager."""
 
     def __init__(self, cfg: PlacecellConfig, scenario: Scenario | None = None,
-                 frame_filter: FrameFilter | None = None, map_path: Path | None = None
-                 ) -> None:
-        """``map_path``: keep the map file there (default: a temporary one)."""
+                 frame_filter: FrameFilter | None = None, map_path: Path | None = None,
+                 remote: RemoteSimRobot | None = None) -> None:
+        """``map_path``: keep the map file there (default: a temporary one). ``remote``:
+        the robot runs in its own process (``cfg`` on the ros2 backends, open_run); the
+        experiment's truth comes from it, at the frames the run reads."""
         self.cfg = cfg
         self.ctx = HalContext(cfg)
-        self.robot: SimRobot = self.ctx.shared("sim.robot",
-                                               lambda: build_sim_robot(cfg, scenario))
-        self.camera, self.base = create_camera(cfg.camera, self.ctx), create_base(cfg.base,
-                                                                                 self.ctx)
+        camera = create_camera(cfg.camera, self.ctx)
+        if remote is None:
+            self.robot: SimRobot = self.ctx.shared("sim.robot",
+                                                   lambda: build_sim_robot(cfg, scenario))
+        else:  # answers what open_run's experiments ask of a SimRobot
+            self.robot, camera = cast(SimRobot, remote), remote.watch(camera)
+        self.camera, self.base = camera, create_base(cfg.base, self.ctx)
         self._tmp = tempfile.TemporaryDirectory()
         self.store = MapStore.open(map_path or Path(self._tmp.name) / "map.db",
                                    geometry_checksum(cfg.mirror, cfg.panorama))

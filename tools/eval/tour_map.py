@@ -29,6 +29,7 @@ from tools.eval.lockstep import (
     add_localisation_arguments,
     localisation_settings,
     lockstep_config,
+    open_run,
 )
 
 Point = tuple[float, float]
@@ -136,7 +137,10 @@ def mapped_run(args: argparse.Namespace) -> Iterator[tuple[Run, list[Point]]]:
     if args.map and known is None:
         args.map.unlink(missing_ok=True)
     tour = plan_tour(world)  # once: planning costs seconds on a large world
-    with Run(cfg, map_path=args.map) as run:
+    backends = getattr(args, "backends", "sim")
+    if backends != "sim":
+        key += f" backends={backends}"
+    with open_run(cfg, backends, map_path=args.map) as run:
         if known is None:
             known = learn_along(run, along(tour, args.spacing), args.places, args.speed)
             if args.map:

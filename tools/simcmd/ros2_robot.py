@@ -8,6 +8,14 @@ simulator's odometry drift) and driven by
 ``--cmd-timeout``, as ROS base drivers do). It runs in real time, listening on
 ``--listen`` (loopback by default), until SIGTERM/SIGINT or ``--duration``.
 
+``--truth-service`` adds the simulator's truth interface for an evaluator in another
+process (``placecell-eval … --backends ros2``; never for the daemon, which sees only the
+ROS topics): the zenoh queryable ``placecell_sim/truth`` answers ``{"stamp_ns": N}`` (a
+stamp on the monotonic clock, as frames carry after the ros2 backends' conversion) with
+the true and odometry poses of the simulation step nearest it (``null``: now), and
+``placecell_sim/kidnap`` answers ``{"pose": [x, y, yaw]}`` by carrying the robot there
+(odometry knows nothing of it).
+
 A daemon configured with ``camera.backend = "ros2"`` and ``base.backend = "ros2"``
 connecting there runs the whole method on it, Turn Back and Look included: what a ROS 2
 robot would give it, with the simulator's truth kept out of the daemon.
@@ -18,6 +26,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import json
 import logging
 import signal
 import threading
@@ -40,6 +49,7 @@ from kernel.se2 import SE2
 
 log = logging.getLogger(__name__)
 
+TRUTH_KEY, KIDNAP_KEY = "placecell_sim/truth", "placecell_sim/kidnap"
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED = "sensor_msgs/msg/CompressedImage"
 
@@ -62,6 +72,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "the configured world, the robot waiting for commands)")
     p.add_argument("--start", type=float, nargs=3, metavar=("X", "Y", "YAW"),
                    help="start pose in the world (default: the world's)")
+    p.add_argument("--world", default="", help="world spec (default: the configured one)")
+    p.add_argument("--seed", type=int, default=None, help="the simulator's seed (default: "
+                   "the configured one)")
+    p.add_argument("--truth-service", action="store_true",
+                   help="answer placecell_sim/truth and placecell_sim/kidnap (evaluators)")
     p.add_argument("--truth-out", default="", help="append the true pose per step here "
                    "(JSON lines, for tests; never published)")
 
@@ -87,6 +102,37 @@ class Ros2SimRobot:
         self._stop = threading.Event()
         # The simulator's clock is the monotonic one (realtime); ROS time is the UNIX one.
         self._offset_ns = time.time_ns() - time.monotonic_ns()
+
+    def serve_truth(self, kept_s: float = 30.0) -> None:
+        """The truth interface of the module docstring, for ``kept_s`` of steps."""
+        self.robot.keep_truth(kept_s)
+        self._entities += [self.session.declare_queryable(TRUTH_KEY, self._on_truth),
+                           self.session.declare_queryable(KIDNAP_KEY, self._on_kidnap)]
+
+    def _on_truth(self, query: zenoh.Query) -> None:
+        try:
+            stamp = json.loads(query.payload.to_bytes() if query.payload else b"")["stamp_ns"]
+            stamp_ns = None if stamp is None else int(stamp)
+        except (ValueError, KeyError, TypeError) as e:
+            query.reply_err(f"{TRUTH_KEY}: expected {{\"stamp_ns\": N or null}}: {e}")
+            return
+        found = (self.robot.now_ns(), self.robot.true_pose(), self.robot.odometry_pose()) \
+            if stamp_ns is None else self.robot.truth_at(stamp_ns)
+        if found is None:
+            query.reply_err(f"{TRUTH_KEY}: no step kept near {stamp_ns}")
+            return
+        at, pose, odo = found
+        query.reply(TRUTH_KEY, json.dumps({"stamp_ns": at, "pose": pose, "odometry": odo}))
+
+    def _on_kidnap(self, query: zenoh.Query) -> None:
+        try:
+            x, y, yaw = (float(v) for v in json.loads(
+                query.payload.to_bytes() if query.payload else b"")["pose"])
+        except (ValueError, KeyError, TypeError) as e:
+            query.reply_err(f"{KIDNAP_KEY}: expected {{\"pose\": [x, y, yaw]}}: {e}")
+            return
+        self.robot.kidnap(x, y, yaw)
+        query.reply(KIDNAP_KEY, "{}")
 
     def _on_twist(self, sample: zenoh.Sample) -> None:
         try:
@@ -163,13 +209,17 @@ def run(args: argparse.Namespace) -> int:
                                else "differential")
     sim = dataclasses.replace(config.sim, realtime=True, scenario=args.scenario,
                               start_pose=list(args.start) if args.start else [0.0, 0.0, 0.0],
-                              truth_out=args.truth_out)
+                              truth_out=args.truth_out,
+                              world=args.world or config.sim.world,
+                              seed=config.sim.seed if args.seed is None else args.seed)
     config = dataclasses.replace(config, sim=sim,
                                  base=dataclasses.replace(config.base, sim=base))
     robot = build_sim_robot(config)
     session = wire.open_session(listen=[args.listen])
     node = Ros2SimRobot(robot, session, args.domain, args.image_topic, args.compressed,
                         args.cmd_timeout)
+    if args.truth_service:
+        node.serve_truth()
     signal.signal(signal.SIGTERM, lambda *_: node.stop())
     signal.signal(signal.SIGINT, lambda *_: node.stop())
     log.info("ROS 2 robot on %s: %s, /odom, /cmd_vel (domain %d)", args.listen,
