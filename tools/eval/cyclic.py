@@ -8,8 +8,8 @@ the daemon's Localiser tracks it throughout, and as it comes back to the first p
 which has no transition from the last — it closes the cycle (§7.1.3). Then ``--laps``
 laps follow, positioned by the same Localiser. Errors are against the simulator's truth
 in the current place's frame; the robot is holonomic and keeps its heading, and each leg
-is steered to its true end (as the simulated base's exact moves are; the ros2 base closes
-its moves on odometry).
+is steered to its true end and heading (as the simulated base's exact moves are; the ros2
+base closes its moves on odometry).
 
 Metrics: ``mean_error_m``, ``p95_error_m``, ``final_error_m`` (over the laps after the
 mapping lap), ``odometry_final_error_m`` (dead reckoning over those laps),
@@ -110,14 +110,15 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         aim = [0.0, 0.0]  # where the legs so far end, in the loop's frame
 
         def frames(dx: float, dy: float) -> Iterator[Belief]:
-            """One leg: the move from the true pose to the leg's end (the evaluator's
-            teleop steers by the truth: a base that closes its moves on drifting odometry,
-            such as the ros2 one, drives the same loop as the exact simulated one)."""
+            """One leg: the move from the true pose to the leg's end, the start's heading
+            kept (the evaluator's teleop steers by the truth: a base that closes its moves
+            on drifting odometry, such as the ros2 one, drives the same loop at the same
+            heading as the exact simulated one)."""
             nonlocal switches
             aim[0], aim[1] = aim[0] + dx, aim[1] + dy
             goal = loop_origin.compose(SE2(aim[0], aim[1], 0.0))
             move = SE2.of(r.robot.true_pose()).between(goal)
-            for belief in r.drive(move.x, move.y, 0.0, args.speed):
+            for belief in r.drive(move.x, move.y, move.yaw, args.speed):
                 if r.updates.closed_transition is not None:  # Run.step stored it
                     closed.append(r.updates.closed_transition)
                 switches += belief.switched_from is not None
