@@ -10,8 +10,10 @@ when its reference is the nearest to the true position, or no more than 0.5 m fa
 than the nearest.
 
 Metrics: ``places``, ``frames``, ``mlp_accuracy`` (right on the tour's frames, the
-global search's first frames included), ``first_tracking_frame``, ``false_losses_per_1000``
-(losses declared per 1000 frames; the robot is never carried off here),
+global search's first frames included), ``first_tracking_frame``, ``mean_error_m`` (the
+tracked pose against the truth in its place's frame, on frames tracking in a right
+place), ``false_losses_per_1000`` (losses declared per 1000 frames; the robot is never
+carried off here),
 ``process_ms_median``; and the active set's cue part (design §9: places whose signature
 similarity is within the cue margin of the best) scored on every frame:
 ``inclusion_extra_cue`` (a right place in it), ``mean_set_fraction_extra_cue`` (its size
@@ -76,6 +78,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         signatures = np.stack([signature(to_grey(r.store.reference_panorama(p)), margin)
                                for p in ids])
         right, losses, first_tracking = [], 0, None
+        errors: list[float] = []  # of the tracked pose in the right place
         at = r.cfg.localisation.cue_margin
         margins = sorted({*MARGINS, at})
         included: dict[float, list[bool]] = {m: [] for m in margins}
@@ -89,9 +92,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         both_in: list[bool] = []
         both_fraction: list[float] = []
         for target in _mapped_part(tour, r.references)[1::10]:  # every metre of it
-            for belief in drive_to(r, target, args.speed):
+            for belief in drive_to(r, target, args.speed, start[2]):
                 x, y, _ = r.robot.true_pose()
                 right.append(right_place(r.references, belief.place_id, (x, y)))
+                error = r.error_m(belief)
+                if belief.state == "tracking" and right[-1] and error is not None:
+                    errors.append(error)
                 losses += belief.event is not None and belief.event.kind == "lost"
                 if first_tracking is None and belief.state == "tracking":
                     first_tracking = len(right)
@@ -122,6 +128,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             "places": len(r.references),
             "frames": len(right),
             "mlp_accuracy": round(float(np.mean(right)), 4),
+            "mean_error_m": _rate(errors),
             "first_tracking_frame": first_tracking,
             "false_losses_per_1000": round(1000.0 * losses / max(len(right), 1), 2),
             "process_ms_median": round(float(np.median(r.process_s)) * 1e3, 2),

@@ -50,14 +50,19 @@ def along(points: list[Point], spacing_m: float) -> list[Point]:
     return out
 
 
-def drive_to(run: Run, target: Point, speed: float) -> Iterator[Belief]:
-    """Drive straight to ``target`` (world x, y), heading kept, every frame processed."""
+def drive_to(run: Run, target: Point, speed: float, heading: float | None = None
+             ) -> Iterator[Belief]:
+    """Drive straight to ``target`` (world x, y), every frame processed; the heading kept,
+    or turned to ``heading`` (world yaw) on the way: the evaluator steers by the truth, so
+    a base that closes its moves on drifting odometry (the ros2 one) keeps the tour's
+    heading as the exact simulated base does."""
     x, y, yaw = run.robot.true_pose()
     dx, dy = target[0] - x, target[1] - y
     if math.hypot(dx, dy) < 1e-3:
         return
     c, s = math.cos(yaw), math.sin(yaw)
-    yield from run.drive(c * dx + s * dy, -s * dx + c * dy, 0.0, speed)
+    dyaw = 0.0 if heading is None else math.remainder(heading - yaw, math.tau)
+    yield from run.drive(c * dx + s * dy, -s * dx + c * dy, dyaw, speed)
 
 
 def tour_points(world: World, spacing_m: float) -> list[Point]:
@@ -67,7 +72,8 @@ def tour_points(world: World, spacing_m: float) -> list[Point]:
 def learn_along(run: Run, stops: list[Point], places: int, speed: float) -> dict[int, SE2]:
     """Learn a place at each of ``stops`` in turn — but not within 0.75 x the spacing of
     a place learned already (a tour comes back along corridors) — up to ``places``: the
-    true reference pose of each (by place id)."""
+    true reference pose of each (by place id). The robot keeps the start's heading."""
+    heading = run.robot.true_pose()[2]
     spacing = min((math.dist(a, b) for a, b in zip(stops, stops[1:], strict=False)),
                   default=1.0)
     for stop in stops:
@@ -75,7 +81,7 @@ def learn_along(run: Run, stops: list[Point], places: int, speed: float) -> dict
             break
         if any(math.dist(stop, (r.x, r.y)) < 0.75 * spacing for r in run.references.values()):
             continue
-        for _ in drive_to(run, stop, speed):
+        for _ in drive_to(run, stop, speed, heading):
             pass
         run.learn(f"p{len(run.references) + 1}")
     return dict(run.references)
