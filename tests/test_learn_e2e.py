@@ -299,6 +299,8 @@ def _track_dock_to_door(tmp: Path, references: dict[int, SE2], dock: int, door: 
                    and p["reason"].startswith("the view does not support the estimate")]
     assert all(p["state"] == "tracking" for p in during if p not in unsupported), \
         {p["state"] for p in during}
+    print("frames published lost while driving (the view did not support the estimate):",
+          len(unsupported), "of", len(during))
     assert len(unsupported) <= 0.05 * len(during), (len(unsupported), len(during))
     ids = [p["place"]["id"] for p in poses if p["stamp_ns"] >= t0]
     assert ids[0] == dock and ids[-1] == door, (ids[0], ids[-1])
