@@ -38,6 +38,7 @@ from tests.daemon_harness import (
     write_config,
 )
 from tools.eval.lockstep import lockstep_config, open_run
+from tools.simcmd.ros2_robot import KIDNAP_KEY, TRUTH_KEY
 
 pytestmark = pytest.mark.xdist_group("realtime")
 
@@ -272,3 +273,12 @@ def test_an_experiment_reads_and_drives_the_ros2_robot_through_the_ros2_backends
         later, _ = run.step()
         assert later.stamp_ns > frame.stamp_ns
         assert run.robot.true_pose() == pytest.approx((6.0, 10.0, 1.0), abs=1e-6)
+        # A request that is not the truth interface's is answered with an error naming it.
+        other = zenoh.open(_plain(int(run.cfg.camera.ros2.connect[0].rsplit(":", 1)[1])))
+        try:
+            for key, body in ((TRUTH_KEY, b'{"stamp": 1}'), (KIDNAP_KEY, b"[1, 2]")):
+                replies = list(other.get(key, payload=body, timeout=10.0))
+                assert len(replies) == 1 and replies[0].err is not None, replies
+                assert f"{key}: expected" in replies[0].err.payload.to_string()
+        finally:
+            other.close()

@@ -27,9 +27,9 @@ from daemon.config import PlacecellConfig
 from hal.ros2_wire import open_session
 from kernel.errors import PlacecellError
 from kernel.types import Frame
+from tools.simcmd.ros2_robot import KIDNAP_KEY, TRUTH_KEY
 
 REPO = Path(__file__).resolve().parents[2]
-TRUTH_KEY, KIDNAP_KEY = "placecell_sim/truth", "placecell_sim/kidnap"  # tools/simcmd/ros2_robot
 # How long the robot's process may take to come up (imports, the world's renderer).
 START_TIMEOUT_S = 120.0
 # A run's pauses between frames (a learn's storing) are not a dead link here.
