@@ -138,14 +138,14 @@ def mapped_run(args: argparse.Namespace) -> Iterator[tuple[Run, list[Point]]]:
     settings = localisation_settings(base.localisation, args)
     cfg = lockstep_config(args.seed, world=world_spec, start_pose=world.start_pose,
                           localisation=settings)
+    backends = getattr(args, "backends", "sim")
     key = f"{world_spec} places={args.places} spacing={args.spacing} speed={args.speed} v2"
+    if backends != "sim":  # a map learned through the ros2 backends is another map
+        key += f" backends={backends}"
     known = load_references(args.map, key) if args.map else None
     if args.map and known is None:
         args.map.unlink(missing_ok=True)
     tour = plan_tour(world)  # once: planning costs seconds on a large world
-    backends = getattr(args, "backends", "sim")
-    if backends != "sim":
-        key += f" backends={backends}"
     with open_run(cfg, backends, map_path=args.map) as run:
         if known is None:
             known = learn_along(run, along(tour, args.spacing), args.places, args.speed)
