@@ -78,6 +78,14 @@ class SE2:
                          [0.0, 0.0, -1.0]])
 
 
+def turned_covariance(covariance: np.ndarray, yaw: float) -> np.ndarray:
+    """A 3 x 3 covariance of (x, y, yaw) expressed in a frame turned by ``yaw``
+    (R Σ Rᵀ, R the rotation by yaw about the vertical; the yaw variance is unchanged)."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return np.asarray(R @ covariance @ R.T)
+
+
 # The χ² value with 3 degrees of freedom that 99.9 % of consistent differences stay below.
 CHI2_3_DOF_999 = 16.27
 

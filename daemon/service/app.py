@@ -50,7 +50,7 @@ from daemon.store.sqlite_store import SavedPose
 from daemon.vision.unwarp import Unwarper
 from hal.registry import HalContext, create_base, create_camera
 from kernel.errors import PlacecellError
-from kernel.se2 import SE2
+from kernel.se2 import SE2, turned_covariance
 
 log = logging.getLogger(__name__)
 
@@ -484,9 +484,7 @@ class Daemon:
             return
         if self._site_tie is not None:  # from the site's map into placecell's
             pose = self._site_tie.inverse().compose(pose)
-            c, s = math.cos(-self._site_tie.yaw), math.sin(-self._site_tie.yaw)
-            R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-            covariance = R @ covariance @ R.T
+            covariance = turned_covariance(covariance, -self._site_tie.yaw)
         frame = self.mapper.map_frame
         if localiser is None or not frame:
             log.warning("%s ignored: %s", source,

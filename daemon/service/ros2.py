@@ -40,7 +40,7 @@ import zenoh.ext
 
 from daemon.config import Ros2Settings
 from hal import ros2_wire as wire
-from kernel.se2 import SE2
+from kernel.se2 import SE2, turned_covariance
 
 MSG_TYPE = "geometry_msgs/msg/PoseWithCovarianceStamped"
 TF_TYPE = "tf2_msgs/msg/TFMessage"
@@ -182,9 +182,7 @@ class Ros2PosePublisher:
         place's heading in the map (``place``: the place's reference in the map frame);
         ``stamp_ns`` the frame's time on the UNIX clock; ``odometry`` (odom -> base at that
         time) gives map -> odom = (map -> base) ∘ (odom -> base)⁻¹, as AMCL publishes it."""
-        c, s = math.cos(place.yaw), math.sin(place.yaw)
-        R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        self.publish(in_map, R @ covariance_in_place @ R.T, stamp_ns)
+        self.publish(in_map, turned_covariance(covariance_in_place, place.yaw), stamp_ns)
         if odometry is not None:
             self.map_odom = in_map.compose(odometry.inverse())
             self.publish_tf(self.map_odom, stamp_ns,
