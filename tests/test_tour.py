@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from hal.sim.scenario import scenario_from_dict
-from hal.sim.tour import plan_tour
+from hal.sim.tour import close_lap, plan_tour
 from hal.sim.world import World, load_world
 
 
@@ -43,6 +43,23 @@ def test_tour_keeps_its_clearance_and_returns(spec: str) -> None:
     assert math.dist(tour[0], world.start_pose[:2]) < 0.05
     assert math.dist(tour[-1], world.start_pose[:2]) < 0.05
     assert max(math.dist(a, b) for a, b in zip(tour[:-1], tour[1:], strict=True)) <= 0.51
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_tour_cut_short_comes_back_round_the_walls(seed: int) -> None:
+    """The endurance experiment's ``--waypoints N``: the first N waypoints, then back to
+    the first one; laps of it repeated. Cut from the office tour, the straight line from
+    the 120th waypoint to the start crosses walls (16 m on office 2); the lap keeps the
+    tour's clearance all the way round, the step into the next lap included."""
+    world = load_world(f"generate:office:{seed}")
+    cut = plan_tour(world, clearance=0.4)[:120]
+    lap = close_lap(world, cut, clearance=0.4)
+    assert lap[:120] == cut and lap == close_lap(world, cut, clearance=0.4)
+    laps = [*lap, *lap]
+    assert _wall_distance(world, _along(laps)).min() >= 0.4
+    assert max(math.dist(a, b) for a, b in zip(laps[:-1], laps[1:], strict=True)) <= 0.51
+    if seed == 2:  # what closing the lap is for: the straight way back runs into walls
+        assert _wall_distance(world, _along([cut[-1], cut[0]])).min() < 0.05
 
 
 def test_office_tour_enters_every_room() -> None:

@@ -87,6 +87,25 @@ def plan_tour(world: World, clearance: float = 0.4, laps: int = 1
     return _simplify(grid, path, clearance) * laps
 
 
+def close_lap(world: World, points: list[tuple[float, float]], clearance: float = 0.4
+              ) -> list[tuple[float, float]]:
+    """``points`` (a tour cut short: its first waypoints) and then the shortest path
+    keeping ``clearance`` from their last point back towards their first (which starts
+    the next lap), so a lap of them repeated never drives through a wall from its end to
+    its start."""
+    grid = _Grid(world)
+    clearance += RESOLUTION / 2
+    graph, index = _graph(grid, clearance)
+    end, start = grid.cell(*points[-1]), grid.cell(*points[0])
+    for x, y in (end, start):
+        if index[y, x] < 0:
+            raise TourError(f"{world.name}: ({grid.point(x, y)}) has less than "
+                            f"{clearance} m of room")
+    _, pred = dijkstra(graph, indices=index[end[1], end[0]], return_predecessors=True)
+    back = _simplify(grid, _backtrack(pred, index, grid, end, start), clearance)
+    return [*points, *back[1:-1]]
+
+
 def _goals(grid: _Grid, clearance: float) -> list[tuple[int, int]]:
     """In every room, its most open point, then farthest-point samples until every open
     cell of the room is within COVER of a goal (a corridor gets one every few metres)."""

@@ -17,7 +17,11 @@ daemon's loop. The evaluator (and only it) reads the truth:
   and Localiser), resumed from the pose tracked last, as the daemon saves and resumes it;
 - an *operator's learn* is a learn asked for by name (the operator pre-empting the
   autopilot, as the daemon lets it): from its time on, the next time the autopilot wants a
-  place, the operator's learn is made there instead.
+  place, the operator's learn is made there instead — or sooner, where the operator sees
+  the robot stand ``OPERATOR_ROOM_M`` from every place (truth decides when the operator
+  acts, never what the daemon does);
+- a lap cut short (``--waypoints``) comes back to its start along the shortest way round
+  the walls (hal/sim/tour.py ``close_lap``).
 
 Metrics: ``tracking_fraction`` (of the frames the localiser sees, those ``tracking``
 within 0.5 m of the truth in the place it names: the right place, or in a new segment
@@ -44,13 +48,18 @@ import numpy as np
 from daemon.config import PlacecellConfig, load
 from daemon.localisation.belief import Belief
 from daemon.store.sqlite_store import SavedPose
-from hal.sim.scenario import Scenario, scenario_from_dict
+from hal.sim.scenario import Scenario, Waypoint, scenario_from_dict
+from hal.sim.tour import close_lap
+from hal.sim.world import load_world
 from kernel.errors import LearningError, PlacecellError
 from tools.eval import mapping
 from tools.eval.lockstep import Run
 
 RIGHT_M = 0.5  # a tracked pose this near the truth is right (design §9's slack)
 DUPLICATE_M = 0.3  # two places whose references stand this near are one place twice
+# An operator learns where no place stands this near (places along a path stand ~1.2 m
+# apart, so the autopilot's min_distance_m, 0.75 m, is found nowhere on a mapped path).
+OPERATOR_ROOM_M = 0.5
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -58,7 +67,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--speed", type=float, default=0.4, help="tour speed, m/s")
     p.add_argument("--frame-rate", type=float, default=5.0, help="camera frames per second")
     p.add_argument("--waypoints", type=int, default=0,
-                   help="only the first N waypoints of each lap (0: the whole tour)")
+                   help="only the first N waypoints of each lap, then the shortest way "
+                   "back to its start (0: the whole tour)")
     p.add_argument("--restarts", type=int, default=3)
     p.add_argument("--mapped-kidnaps", type=int, default=3)
     p.add_argument("--unmapped-kidnaps", type=int, default=1)
@@ -101,7 +111,11 @@ def _scenario(args: argparse.Namespace, laps: int) -> Scenario:
         "frame_rate_hz": args.frame_rate,
         "trajectory": {"kind": "tour", "speed": args.speed, "laps": 1,
                        "resume_after_s": 1.0}})
-    lap = scenario.waypoints[:args.waypoints] if args.waypoints else scenario.waypoints
+    lap = scenario.waypoints
+    if args.waypoints and args.waypoints < len(lap):  # cut short, and back to the start
+        speed = lap[0].speed                             # round the walls
+        lap = tuple(Waypoint(x, y, speed) for x, y in close_lap(
+            load_world(mapping.world_spec(args)), [(w.x, w.y) for w in lap[:args.waypoints]]))
     return dataclasses.replace(scenario, waypoints=tuple(lap) * laps)
 
 
@@ -209,11 +223,11 @@ class Endurance:
                 t.unmapped_s.append(r.robot.now_ns() / 1e9 - at_s)
                 t.open_kidnap = None
         why = r.session.wants_place(belief, r.localiser.odometry.latest, job_running=False)
-        if why is not None and self.operator_due:
+        if self.operator_due and (why is not None or self._operator_sees_room()):
             self.operator_due -= 1
             t.operator_learns += 1
             try:
-                if not self._learn("operator", f"the operator asked ({why})"):
+                if not self._learn("operator", f"the operator asked ({why or 'room'})"):
                     t.operator_refused += 1
             except PlacecellError:
                 t.operator_refused += 1
@@ -238,6 +252,14 @@ class Endurance:
                                   "event": "learned", "place": place.id, "by": started_by,
                                   "why": why})
         return True
+
+    def _operator_sees_room(self) -> bool:
+        """The operator, who sees the robot and the map's places, finds no place within
+        ``OPERATOR_ROOM_M`` of it (truth decides when the operator acts, never what the
+        daemon does)."""
+        x, y, _ = self.r.robot.true_pose()
+        return all(math.dist((x, y), (ref.x, ref.y)) >= OPERATOR_ROOM_M
+                   for ref in self.r.references.values())
 
     def _act(self, action: str) -> None:
         r, t = self.r, self.tally
