@@ -177,6 +177,9 @@ class Endurance:
             "frame": self.tally.frames, "t_s": round(r.robot.now_ns() / 1e9, 2),
             "state": belief.state, "place": belief.place_id, "nearest": nearest,
             "error_m": None if error is None else round(error, 3),
+            "yaw_error_deg": None if error is None or belief.pose_in_place is None else
+            round(math.degrees(math.remainder(belief.pose_in_place[2] - r.truth_in(
+                belief.place_id).yaw, 2 * math.pi)), 1) if belief.place_id is not None else None,
             "sigma_m": round(_sigma(belief), 3) if belief.covariance else None,
             "confidence": belief.confidence,
             "event": None if belief.event is None else
