@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from daemon.localisation.belief import Belief, MapUpdates
+from daemon.localisation.belief import Belief, LocalisationEvent, MapUpdates
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.acquisition import AcquisitionDecision
 from daemon.mapping.settings import AcquisitionSettings, OdometryNoiseSettings
@@ -113,3 +113,30 @@ def test_the_autopilot_learns_the_first_place_a_faded_one_and_in_unmapped_space(
                                 Odometry(0.05 * k, 0.0, 0.0, k, k), False) for k in range(9)]
     assert whys[:6] == [None] * 6  # searched 5 frames at k = 4, but 0.3 m only at k = 6
     assert whys[6] is not None and whys[6].startswith("unmapped space")
+
+
+def test_a_loss_ends_the_odometry_run_from_the_last_place(tmp_path: Path) -> None:
+    """A place learned after a loss is not linked to the last place by odometry: the robot
+    may have been carried off in between, which odometry cannot see (office 2: a link
+    across a kidnap put a place 9.8 m off). Before the loss the run links; a relocalised
+    event does not end it; in localisation mode a loss ends it too (an operator's learn)."""
+    for mode in ("mapping", "localisation"):
+        session = _session(tmp_path / f"{mode}.db", mode)
+        mapper = session.mapper
+
+        def odo(x: float, stamp: int) -> Odometry:
+            return Odometry(x, 0.0, 0.0, stamp, stamp)
+
+        assert mapper.begin_place(odo(0.0, 1)) == []  # the first place: nothing to join
+        a, _ = mapper.add_place(synthetic_place(np.random.default_rng(5), "a", n=4, width=64,
+                                                height=24, margin=0), [])
+        mapper.on_odometry([odo(0.5, 2), odo(1.0, 3)])
+        session.observe(_belief("tracking", event=LocalisationEvent("relocalised", a.id,
+                                                                    "local")), MapUpdates())
+        links = mapper.begin_place(odo(1.0, 3))
+        assert [(link.from_id, link.source) for link in links] == [(a.id, "odometry")]
+        assert links[0].T_from_new.mean.x == pytest.approx(1.0)
+        mapper.cancel_place()
+        session.observe(_belief("lost", event=LocalisationEvent("lost", a.id, "sensor")),
+                        MapUpdates())
+        assert mapper.begin_place(odo(1.0, 3)) == [], mode

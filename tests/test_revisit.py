@@ -9,15 +9,21 @@ truth (the places' reference poses) stays on the test's side."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from daemon.localisation.acquisition_watch import Tracked, revisitable
 from daemon.localisation.known_map import KnownMap, MapHolder
 from daemon.localisation.localiser import Localiser
 from daemon.mapping.settings import AcquisitionSettings
+from daemon.mapping.transition import Transition
+from kernel.se2 import SE2, UncertainSE2
 from tests.conftest import OfficeMap
+from tests.map_fixtures import synthetic_place
 from tools.eval.lockstep import Run, lockstep_config
 
 Frames = list[tuple[float, int | None, int | None, int | None]]
@@ -70,3 +76,21 @@ def test_without_the_revisit_check_the_place_passed_again_is_not_seen(
     frames, ids = _drive_back_past_a(tmp_path, office_map, candidates=0)
     assert min(f[0] for f in frames) < 0.2  # the robot did pass a
     assert all(f[1] == ids["c"] for f in frames)
+
+
+def test_a_place_the_map_puts_near_is_left_to_the_switcher() -> None:
+    """revisitable: places 1-2-3 in a row 1.5 m apart, 4 linked to nothing. Tracked in 2
+    at its reference, a revisit may find 4 only: 1 and 3 are the switcher's (within
+    3 m through the map), 2 is tracked, and the watched one is left out; not tracking,
+    every place but the watched one may be revisited; 20 m on along the row (the
+    estimate far from 1 and 3), 1 and 3 may be again."""
+    rng = np.random.default_rng(7)
+    places = [dataclasses.replace(synthetic_place(rng, str(k), n=4, width=64, height=24,
+                                                  margin=0), id=k) for k in (1, 2, 3, 4)]
+    step = UncertainSE2(SE2(1.5, 0.0, 0.0), np.diag([1e-4, 1e-4, 1e-5]))
+    known = KnownMap.of(places, [Transition(1, 2, step, "vision"),
+                                 Transition(2, 3, step, "vision")])
+    assert revisitable(known, 1, Tracked(known, 2, True, (0.0, 0.0, 0.0)), 3.0) == [4]
+    assert revisitable(known, 4, Tracked(known, 2, True, (0.0, 0.0, 0.0)), 3.0) == []
+    assert revisitable(known, 1, Tracked(known, None, False), 3.0) == [2, 3, 4]
+    assert revisitable(known, 4, Tracked(known, 2, True, (20.0, 0.0, 0.0)), 3.0) == [1, 3]

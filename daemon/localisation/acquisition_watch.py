@@ -66,6 +66,20 @@ class WatchStep:
     revisited: PlaceScore | None = None  # a known place recognised where the robot is
 
 
+def revisitable(known: KnownMap, watched: int, tracked: Tracked, within_m: float
+                ) -> list[int]:
+    """The places a revisit may find (design §6): all but the watched and the tracked
+    one and those the map's transitions put within ``within_m`` of the estimate (the path's
+    drift at 2 sigma allowed). Those are the place switcher's (design §8), which hands
+    over to them with the estimate carried through the transition; taken for a revisit,
+    one was tracked from its reference instead, where the robot was not (office 1: a
+    neighbour 1.46 m off, tracked 0.9 m and 30 degrees wrong for 25 frames)."""
+    near = set() if tracked.place_id is None or tracked.pose is None \
+        or tracked.through is None else places_near(tracked.place_id, tracked.pose,
+                                                    tracked.through, within_m)
+    return [p for p in known.places if p not in (watched, tracked.place_id) and p not in near]
+
+
 class AcquisitionWatch:
     def __init__(self, settings: AcquisitionSettings, matcher: FastMatcher,
                  wrap_margin: int, default_background: float) -> None:
@@ -157,15 +171,16 @@ class AcquisitionWatch:
         §6): the ``revisit_candidates`` places whose signatures are most like the view
         are recognised in every frame, and one standing ``certain_lead`` above its
         background, and above the watched place, is where the robot is: acquisition
-        watches it from here (and the localiser has the tracker start in it). Without
+        watches it from here (and the localiser has the tracker start in it) — of the
+        places :func:`revisitable`. Without
         this a tour coming back along a corridor never recognised the places of its
         first pass there: the tracker followed the new places, and the map's long chain
         put the old ones metres away (office 3: new places learned 0.29 and 0.41 m from
         old ones, the robot passing within 0.01 m of one)."""
         assert self._watched is not None
         watched = self._watched[0]
-        top = self._most_like_view(known, grey, [p for p in known.places
-                                                 if p not in (watched, tracked.place_id)])
+        top = self._most_like_view(known, grey, revisitable(
+            known, watched, tracked, self.settings.known_within_m))
         if not top:
             return None
         best = max(score(top), key=lambda sc: sc.lead)

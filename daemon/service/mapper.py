@@ -130,6 +130,16 @@ class Mapper:
                 if chain is not None:
                     chain.broken = True
 
+    def odometry_doubted(self) -> None:
+        """Tracking was lost: the robot may have been carried off, which odometry cannot
+        see, so the run of odometry from the last place learned measures no transition any
+        more (office 2: the next place linked to it by 4.7 m of odometry across a kidnap
+        put a place 9.8 m off, and the tracker switched there). A place being learned
+        keeps its own run: its job watches the robot."""
+        with self._lock:
+            if self._chain is not None:
+                self._chain.broken = True
+
     # ------------------------------------------------------------ learning
     def begin_place(self, reference: Odometry, seen: Seen | None = None) -> list[Link]:
         """A place is being learned at the pose where odometry read ``reference``: start

@@ -105,8 +105,10 @@ class MappingSession:
     def observe(self, belief: Belief, updates: MapUpdates) -> list[Event]:
         """What a frame does to the map (``updates``, found beside ``belief``): the floor
         model learned, backgrounds measured as the robot left places, a cycle closed
-        (§7.1.3), the watched place's background reached (design §6). Returns the events
-        to publish."""
+        (§7.1.3), the watched place's background reached (design §6); a loss ends the
+        odometry run from the last place learned. Returns the events to publish."""
+        if belief.event is not None and belief.event.kind == "lost":
+            self.mapper.odometry_doubted()  # carried off? odometry cannot tell
         if not self.mapping:
             if updates.closed_transition is not None:
                 t = updates.closed_transition
