@@ -45,6 +45,10 @@ def test_a_frame_whose_view_contradicts_the_estimate_is_not_tracking() -> None:
     assert not contradicted(0.11, 0.4, S)
     assert contradicted(0.5, 0.0, S)  # no landmark seen agrees: confidence 0
     assert not contradicted(None, 0.3, S)  # too few usable landmarks: no evidence
+    # A frame that switched places: the output is the left place's; confidence 0 is
+    # still never published tracking.
+    assert contradicted(0.5, 0.0, S, switched=True)
+    assert not contradicted(0.007, 0.6, S, switched=True)
 
 
 class Scripted:

@@ -670,9 +670,8 @@ class Localiser:
         state: BeliefState = "tracking"
         reason = f"tracking in place {place}"
         support = None if local is None or math.isnan(local.support) else local.support
-        if self.mode == "track" and local is not None and switched_from is None \
-                and contradicted(support, local.confidence, self.settings):
-            # (A frame that switched places scored the place it left: nothing to doubt.)
+        if self.mode == "track" and local is not None and contradicted(
+                support, local.confidence, self.settings, switched=switched_from is not None):
             state, reason = "lost", (
                 f"the view does not support the estimate in place {place}: its landmarks "
                 f"are not where the estimate puts them (sensor output "

@@ -62,12 +62,16 @@ def after_recovering(found: bool, leader: int | None, step: int, frames: int,
 
 
 def contradicted(support: float | None, confidence: float,
-                 settings: LocalisationSettings) -> bool:
+                 settings: LocalisationSettings, switched: bool = False) -> bool:
     """A tracked frame whose view contradicts the estimate: the output over the usable
     landmarks below ``doubt_output``, or no landmark seen agreeing at all (confidence 0).
     Such a frame is not published ``tracking`` (issue 31: a robot carried off was
     published tracking 3.3 m off for the 4 frames before the loss rule fired); ``None``
-    support (too few landmarks usable: no evidence either way) contradicts nothing."""
+    support (too few landmarks usable: no evidence either way) contradicts nothing. A frame
+    that ``switched`` places scored the place it left, whose output says nothing of the
+    new one: only confidence 0 counts then (office 2 published such a frame tracking)."""
+    if switched:
+        return confidence <= 0.0
     return confidence <= 0.0 or (support is not None and support < settings.doubt_output)
 
 
