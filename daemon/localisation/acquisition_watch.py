@@ -172,11 +172,11 @@ class AcquisitionWatch:
         are recognised in every frame, and one standing ``certain_lead`` above its
         background, and above the watched place, is where the robot is: acquisition
         watches it from here (and the localiser has the tracker start in it) — of the
-        places :func:`revisitable`. Without
-        this a tour coming back along a corridor never recognised the places of its
-        first pass there: the tracker followed the new places, and the map's long chain
-        put the old ones metres away (office 3: new places learned 0.29 and 0.41 m from
-        old ones, the robot passing within 0.01 m of one)."""
+        places :func:`revisitable`. Without this a tour coming back along a corridor
+        never recognised the places of its first pass there: the tracker followed the
+        new places, and the map's long chain put the old ones metres away (office 3: new
+        places learned 0.29 and 0.41 m from old ones, the robot passing within 0.01 m of
+        one)."""
         assert self._watched is not None
         watched = self._watched[0]
         top = self._most_like_view(known, grey, revisitable(
