@@ -119,6 +119,7 @@ def test_travel_with_no_evidence_at_all_is_a_loss_of_its_own() -> None:
     assert loss.observe(0.6, 0.3) is False and loss.blind_m == 0.0  # evidence: again
     assert [loss.observe(nan, d) for d in (0.5, 0.0, 0.0, 0.45)] == [False] * 4
     assert loss.observe(nan, 0.1) is True and "no evidence over 1.0 m" in loss.why
+    assert loss.blind  # nothing contradicted: the odometry run from the last place stands
     assert loss.observe(nan, 0.3) is False  # declared once
     never = LossDetector(LocalisationSettings(blind_m=0.0))
     assert not any(never.observe(nan, 1.0) for _ in range(100))
@@ -127,7 +128,7 @@ def test_travel_with_no_evidence_at_all_is_a_loss_of_its_own() -> None:
 def test_the_reason_of_a_loss_names_its_rule() -> None:
     loss = LossDetector(LocalisationSettings(loss_output=0.15, loss_frames=2))
     assert [loss.observe(v) for v in (0.1, 0.1)] == [False, True]
-    assert loss.why == "sensor output below 0.15 for 2 frames"
+    assert loss.why == "sensor output below 0.15 for 2 frames" and not loss.blind
 
 
 def test_with_a_cue_the_active_set_is_searched_best_first_and_decides() -> None:

@@ -116,10 +116,11 @@ def test_the_autopilot_learns_the_first_place_a_faded_one_and_in_unmapped_space(
 
 
 def test_a_loss_ends_the_odometry_run_from_the_last_place(tmp_path: Path) -> None:
-    """A place learned after a loss is not linked to the last place by odometry: the robot
-    may have been carried off in between, which odometry cannot see (office 2: a link
-    across a kidnap put a place 9.8 m off). Before the loss the run links; a relocalised
-    event does not end it; in localisation mode a loss ends it too (an operator's learn)."""
+    """A place learned after a loss where the view contradicted the estimate is not linked
+    to the last place by odometry: the robot may have been carried off in between, which
+    odometry cannot see (office 2: a link across a kidnap put a place 9.8 m off). Before
+    the loss the run links; a relocalised event or a loss by blind travel does not end it;
+    in localisation mode a loss ends it too (an operator's learn)."""
     for mode in ("mapping", "localisation"):
         session = _session(tmp_path / f"{mode}.db", mode)
         mapper = session.mapper
@@ -137,6 +138,12 @@ def test_a_loss_ends_the_odometry_run_from_the_last_place(tmp_path: Path) -> Non
         assert [(link.from_id, link.source) for link in links] == [(a.id, "odometry")]
         assert links[0].T_from_new.mean.x == pytest.approx(1.0)
         mapper.cancel_place()
-        session.observe(_belief("lost", event=LocalisationEvent("lost", a.id, "sensor")),
+        # Blind travel (no evidence either way) leaves the run: between places out of
+        # view, odometry is the link (§7.1.2).
+        session.observe(_belief("lost", event=LocalisationEvent("lost", a.id, "blind")),
                         MapUpdates())
+        assert [link.from_id for link in mapper.begin_place(odo(1.0, 3))] == [a.id]
+        mapper.cancel_place()
+        session.observe(_belief("lost", event=LocalisationEvent(
+            "lost", a.id, "sensor", contradicted=True)), MapUpdates())
         assert mapper.begin_place(odo(1.0, 3)) == [], mode

@@ -98,6 +98,7 @@ def test_a_loss_goes_through_both_recovery_steps_then_to_the_best_place_elsewher
     assert [e is not None for e in events] == [False] * (S.loss_frames - 1) + [True]
     lost = events[-1]
     assert lost.kind == "lost" and lost.place_id == 1 and "sensor output" in lost.how
+    assert lost.contradicted  # the view said no: maybe carried off
     assert machine.mode == "recover" and machine.step == 1
     assert t.calls == [("lost", 1), ("spread", 1)]
     _frames(machine, t, S.recovery_frames, 0.01, False, places, 1, 10)
@@ -120,6 +121,7 @@ def test_a_clear_leader_sends_a_loss_straight_to_it() -> None:
     # The search ran from the first low frame; place 2 led it for led_frames before the
     # sensor rule's loss_frames: lost by the lead, and straight to place 2.
     assert len(events) == 1 and "another place led" in events[0].how
+    assert events[0].contradicted
     assert t.calls == [("lost", 0), ("start_in", 2)] and machine.mode == "confirm"
 
 

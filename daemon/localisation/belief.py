@@ -34,6 +34,9 @@ class LocalisationEvent:
     how: str  # lost: why; relocalised: "local" | "place" | "global" (the recovery step)
     took_s: float = 0.0  # relocalised: from the loss (or the search's start), by stamps
     frames: int = 0  # ...and in frames
+    # lost: the view contradicted the estimate (the output rule, or another place leading
+    # the search) — maybe a robot carried off; False: no evidence either way (blind travel)
+    contradicted: bool = False
 
 
 @dataclass(frozen=True)

@@ -164,6 +164,7 @@ class LossDetector:
         self.low_frames = 0
         self.blind_m = 0.0  # odometry travel since the last frame with evidence
         self.why = ""  # the reason of the last loss declared
+        self.blind = False  # ...declared by the blind rule (no evidence, nothing contradicted)
 
     def reset(self) -> None:
         self.low_frames = 0
@@ -181,12 +182,14 @@ class LossDetector:
                 self.why = (f"no evidence over {s.blind_m:.1f} m: fewer than "
                             f"{s.evidence_landmarks} of the place's landmarks usable from "
                             "the estimate (odometry alone)")
+                self.blind = True
                 return True
             return False
         self.blind_m = 0.0
         self.low_frames = self.low_frames + 1 if output < s.loss_output else 0
         if self.low_frames == s.loss_frames:
             self.why = f"sensor output below {s.loss_output} for {s.loss_frames} frames"
+            self.blind = False
             return True
         return False
 

@@ -228,7 +228,8 @@ class Relocalisation:
             self.episode = (stamp_ns, frame)
             event = LocalisationEvent("lost", current, self.loss.why if lost_now else
                                       f"another place led the search by "
-                                      f"{s.search_margin} for {s.led_frames} frames")
+                                      f"{s.search_margin} for {s.led_frames} frames",
+                                      contradicted=not (lost_now and self.loss.blind))
             trackers.lost(by_sensor=lost_now)
             self.lead_watch.reset()
             leader = self.leader(trackers, current, places)

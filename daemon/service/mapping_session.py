@@ -105,9 +105,12 @@ class MappingSession:
     def observe(self, belief: Belief, updates: MapUpdates) -> list[Event]:
         """What a frame does to the map (``updates``, found beside ``belief``): the floor
         model learned, backgrounds measured as the robot left places, a cycle closed
-        (§7.1.3), the watched place's background reached (design §6); a loss ends the
-        odometry run from the last place learned. Returns the events to publish."""
-        if belief.event is not None and belief.event.kind == "lost":
+        (§7.1.3), the watched place's background reached (design §6); a loss where the
+        view contradicted the estimate ends the odometry run from the last place learned
+        (a loss by blind travel does not: between places out of view, odometry is the
+        link, §7.1.2). Returns the events to publish."""
+        if belief.event is not None and belief.event.kind == "lost" \
+                and belief.event.contradicted:
             self.mapper.odometry_doubted()  # carried off? odometry cannot tell
         if not self.mapping:
             if updates.closed_transition is not None:
