@@ -82,8 +82,7 @@ def plan_tour(world: World, clearance: float = 0.4, laps: int = 1
         here = nxt
     if len(path) == 1:
         raise TourError(f"{world.name}: no room reachable with {clearance} m of clearance")
-    _, pred = dijkstra(graph, indices=index[here[1], here[0]], return_predecessors=True)
-    path += _backtrack(pred, index, grid, here, start)[1:]
+    path += _shortest(graph, index, grid, here, start)[1:]
     return _simplify(grid, path, clearance) * laps
 
 
@@ -101,8 +100,7 @@ def close_lap(world: World, points: list[tuple[float, float]], clearance: float 
         if index[y, x] < 0:
             raise TourError(f"{world.name}: ({grid.point(x, y)}) has less than "
                             f"{clearance} m of room")
-    _, pred = dijkstra(graph, indices=index[end[1], end[0]], return_predecessors=True)
-    back = _simplify(grid, _backtrack(pred, index, grid, end, start), clearance)
+    back = _simplify(grid, _shortest(graph, index, grid, end, start), clearance)
     return [*points, *back[1:-1]]
 
 
@@ -151,6 +149,13 @@ def _graph(grid: _Grid, clearance: float) -> tuple[csr_matrix, np.ndarray]:
     graph = csr_matrix((np.concatenate(weights), (np.concatenate(rows), np.concatenate(cols))),
                        shape=(n, n))
     return graph, index
+
+
+def _shortest(graph: csr_matrix, index: np.ndarray, grid: _Grid, source: tuple[int, int],
+              target: tuple[int, int]) -> list[tuple[int, int]]:
+    """The cells of the shortest clear path from ``source`` to ``target``."""
+    _, pred = dijkstra(graph, indices=index[source[1], source[0]], return_predecessors=True)
+    return _backtrack(pred, index, grid, source, target)
 
 
 def _backtrack(pred: np.ndarray, index: np.ndarray, grid: _Grid, source: tuple[int, int],

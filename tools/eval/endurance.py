@@ -144,6 +144,14 @@ def _error(r: Run, belief: Belief) -> float | None:
     return r.error_m(belief) if belief.place_id in r.references else None
 
 
+def _yaw_error_deg(r: Run, belief: Belief) -> float | None:
+    """The belief's heading against the truth in its place, degrees (trace only)."""
+    if belief.place_id is None or belief.pose_in_place is None:
+        return None
+    yaw = belief.pose_in_place[2] - r.truth_in(belief.place_id).yaw
+    return round(math.degrees(math.remainder(yaw, 2 * math.pi)), 1)
+
+
 def _sigma(belief: Belief) -> float:
     if belief.covariance is None:
         return math.inf
@@ -177,9 +185,7 @@ class Endurance:
             "frame": self.tally.frames, "t_s": round(r.robot.now_ns() / 1e9, 2),
             "state": belief.state, "place": belief.place_id, "nearest": nearest,
             "error_m": None if error is None else round(error, 3),
-            "yaw_error_deg": None if error is None or belief.pose_in_place is None else
-            round(math.degrees(math.remainder(belief.pose_in_place[2] - r.truth_in(
-                belief.place_id).yaw, 2 * math.pi)), 1) if belief.place_id is not None else None,
+            "yaw_error_deg": _yaw_error_deg(r, belief) if error is not None else None,
             "sigma_m": round(_sigma(belief), 3) if belief.covariance else None,
             "confidence": belief.confidence,
             "event": None if belief.event is None else
