@@ -6,7 +6,6 @@ import contextlib
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -18,44 +17,10 @@ from typing import Any
 import zenoh
 
 from tests.api_schema import check
-
-REPO = Path(__file__).resolve().parent.parent
-DEFAULT_CONFIG = REPO / "config" / "placecell.toml"
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
-    out = dict(base)
-    for k, v in over.items():
-        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
-    return out
-
-
-def _toml(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return json.dumps(value)
-    if isinstance(value, list):
-        return "[" + ", ".join(_toml(v) for v in value) + "]"
-    return repr(value)
-
-
-def dump_toml(data: dict[str, Any], prefix: str = "") -> str:
-    lines = []
-    scalars = {k: v for k, v in data.items() if not isinstance(v, dict)}
-    if prefix and scalars:
-        lines.append(f"[{prefix}]")
-    lines += [f"{k} = {_toml(v)}" for k, v in scalars.items()]
-    for k, v in data.items():
-        if isinstance(v, dict):
-            lines.append(dump_toml(v, f"{prefix}.{k}" if prefix else k))
-    return "\n".join(lines) + "\n"
+from tools.daemon_process import DEFAULT_CONFIG, merge
+from tools.daemon_process import REPO as REPO
+from tools.daemon_process import dump_toml as dump_toml
+from tools.daemon_process import free_port as free_port
 
 
 def write_config(tmp: Path, overrides: dict[str, Any] | None = None, *,
@@ -64,15 +29,14 @@ def write_config(tmp: Path, overrides: dict[str, Any] | None = None, *,
     unless ``demo`` (what ``make run`` shows), a still robot that learns no place on its
     own."""
     port = free_port()
-    data = tomllib.loads(DEFAULT_CONFIG.read_text())
-    data = _merge(data, {
+    data = merge(tomllib.loads(DEFAULT_CONFIG.read_text()), {
         "zenoh": {"listen": [f"tcp/127.0.0.1:{port}"]},
         "map": {"path": str(tmp / "map.db")},
     })
     if not demo:
-        data = _merge(data, {"sim": {"scenario": ""},
+        data = merge(data, {"sim": {"scenario": ""},
                              "mapping": {"acquisition": {"enabled": False}}})
-    data = _merge(data, overrides or {})
+    data = merge(data, overrides or {})
     path = tmp / "placecell.toml"
     path.write_text(dump_toml(data))
     return path, port

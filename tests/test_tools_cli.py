@@ -40,3 +40,19 @@ def test_world_and_render_commands(tmp_path: Path) -> None:
                           "--pose", "nonsense", "--out", str(pics)], cwd=REPO,
                          capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "--pose" in bad.stderr
+
+
+def test_process_usage_counts_cpu_time_and_memory() -> None:
+    """What the daemon benchmark reads of a process (tools/daemon_process.usage)."""
+    import os
+    import time
+
+    from tools.daemon_process import usage
+
+    before = usage(os.getpid())
+    spin_until = time.process_time() + 0.2
+    while time.process_time() < spin_until:
+        pass
+    after = usage(os.getpid())
+    assert after.cpu_s - before.cpu_s >= 0.15
+    assert 10 < after.rss_mb < 10_000

@@ -378,7 +378,8 @@ class Daemon:
             self._publish_events(segments)
             self.publish_event("place_learned", place=p.id, label=p.label,
                                landmarks=p.landmark_count, lookalikes=outcome.lookalikes,
-                               reference_stamp_ns=outcome.reference_stamp_ns)
+                               reference_stamp_ns=outcome.reference_stamp_ns,
+                               compute_s=round(outcome.compute_s, 4))
             self._publish_events([e for e in outcome.events if e not in segments])
         else:
             self.publish_event("learning_ended", code=str(outcome.error),

@@ -145,6 +145,7 @@ class LearnOutcome:
     lookalikes: list[int] = field(default_factory=list)  # places it was told apart from
     reference_stamp_ns: int = 0  # the odometry stamp at the place's reference pose
     events: list[Event] = field(default_factory=list)  # what storing it did to the map
+    compute_s: float = 0.0  # from the end of the drive to the place in the map
 
 
 class LearnJob:
@@ -223,6 +224,7 @@ class LearnJob:
                             abort=self.abort_requested, on_start=self._begin)
             if self.abort_requested.is_set():
                 raise LearningAbortedError("learning aborted on request")
+            driven = time.perf_counter()  # what the robot waits for after the drive
             self._reply("progress", {"phase": "storing", "fraction": 1.0})
             place = Place(tbl.result(), tbl.reference_panorama, label=self.label,
                           created_unix_s=time.time(),
@@ -233,7 +235,7 @@ class LearnJob:
                                                              "fraction": 1.0}))
             stored, transitions = learned.place, learned.transitions
             outcome = LearnOutcome(stored, None, "", learned.lookalikes, tbl.start.stamp_ns,
-                                   learned.events)
+                                   learned.events, time.perf_counter() - driven)
             self._reply("result", {
                 "place": {"id": stored.id, "label": stored.label,
                           "landmarks": stored.landmark_count,

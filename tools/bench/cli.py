@@ -23,6 +23,7 @@ GROUPS = {
     "global": "tools.bench.global_search",
     "disambiguation": "tools.bench.disambiguation",
     "local_space": "tools.bench.local_space",
+    "daemon": "tools.bench.daemon",
 }
 
 
