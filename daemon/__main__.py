@@ -2,13 +2,22 @@
 
 from __future__ import annotations
 
-import argparse
-import logging
-import sys
-from pathlib import Path
+import os
 
-from daemon import config as config_mod
-from kernel.errors import PlacecellError
+# One BLAS thread, set before numpy loads OpenBLAS: the daemon's matrices are small, and
+# OpenBLAS's idle worker threads spin between calls. placecell-bench --only daemon: 0.48
+# of a core in localisation mode with its default threads, 0.24 with one (docs/design.md
+# §13). A deployment may still choose otherwise in the environment.
+for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
+
+import argparse  # noqa: E402 - after the thread settings above
+import logging  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+from daemon import config as config_mod  # noqa: E402
+from kernel.errors import PlacecellError  # noqa: E402
 
 log = logging.getLogger("placecelld")
 

@@ -60,6 +60,7 @@ from hal.sim.world import load_world
 from kernel.panorama import add_wrap_margin, geometry_checksum, to_grey
 from kernel.se2 import SE2, UncertainSE2
 from tools.bench.global_search import _landmarks
+from tools.bench.timing import original_environment
 from tools.daemon_process import REPO, free_port, usage, write_daemon_config
 from tools.eval.lockstep import Run, lockstep_config
 from tools.eval.tour_map import tour_points
@@ -226,7 +227,8 @@ def _daemon(run_dir: Path, overrides: dict[str, Any]
     log = (run_dir / "daemon.log").open("w")
     seen = Observed(time.monotonic())
     proc = _unpinned(subprocess.Popen([sys.executable, "-m", "daemon", "--config", str(config)],
-                                      cwd=REPO, stdout=log, stderr=subprocess.STDOUT))
+                                      cwd=REPO, stdout=log, stderr=subprocess.STDOUT,
+                                      env=original_environment()))
     try:
         yield proc, seen, session
     finally:

@@ -7,11 +7,14 @@ import statistics
 import time
 from collections.abc import Callable
 
+THREAD_SETTINGS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+_ENVIRONMENT = dict(os.environ)  # as this process was started, before pin_to_one_core
+
 
 def pin_to_one_core() -> None:
     """Run the benchmark on one core (and tell OpenCV and BLAS to use one thread: BLAS
     reads its setting when numpy is first imported, so call this before that)."""
-    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    for name in THREAD_SETTINGS:
         os.environ[name] = "1"
     import cv2
 
@@ -34,3 +37,9 @@ def median_seconds(fn: Callable[[], object], repeats: int, inner: int = 1,
             fn()
         samples.append((time.perf_counter() - t0) / inner)
     return statistics.median(samples)
+
+
+def original_environment() -> dict[str, str]:
+    """The environment this process was started with: a process it starts to measure
+    (the daemon) runs as it would without the benchmark's own settings."""
+    return dict(_ENVIRONMENT)
