@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
-from daemon.mapping.lookalikes import own_feature
+from daemon.mapping.lookalikes import likeliest, own_feature
 from daemon.store.sqlite_store import MapStore
 from daemon.vision.disambiguation import (
     Feature,
@@ -56,6 +56,24 @@ def _on(f: Feature, col: int, row: int, side: int) -> bool:
     dx = max(0, min(f.col + f.size, col + side) - max(f.col, col))
     dy = max(0, min(f.row + f.size, row + side) - max(f.row, row))
     return dx * dy >= 0.25 * f.size**2
+
+
+def test_look_alikes_are_sought_among_the_places_whose_signatures_are_likest() -> None:
+    """design §5: beyond ``limit`` places only those the global search's cue ranks
+    nearest a new place's views are looked at; up to it every place is (the map as it
+    was: nothing changes on maps of up to ``limit`` places)."""
+    from daemon.vision.signature import signature
+
+    rng = np.random.default_rng(4)
+    a, b = _aliased_pair(rng)
+    plain = cv2.GaussianBlur(rng.integers(0, 256, (H, W)).astype(np.float32), (9, 9),
+                             3).astype(np.uint8)
+    views = [_wrap(_moved(a, rng, 40))]
+    signatures = {1: signature(_wrap(plain), M), 2: signature(_wrap(b), M),
+                  3: signature(_wrap(255 - plain), M), 4: None,
+                  5: signature(_wrap(_moved(a, rng, -90)), M)}
+    assert likeliest(views, M, signatures, limit=5) == [1, 2, 3, 4, 5]
+    assert likeliest(views, M, signatures, limit=2) == [2, 4, 5]  # 4: no signature to rank
 
 
 def test_the_feature_of_the_place_with_the_sign_is_the_sign() -> None:

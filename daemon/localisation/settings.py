@@ -190,6 +190,10 @@ class LocalisationSettings:
         "are neighbours, not look-alikes")
     max_lookalikes: int = setting(8, ge=0, le=1000, doc="features are found for at most "
                                   "this many look-alikes of a new place, the closest")
+    lookalike_candidates: int = setting(
+        50, ge=1, le=100000, doc="a new place's look-alikes are sought among this many "
+        "places, those whose signatures are most like its views (design §5): a learn's "
+        "work does not grow with the map")
     disambiguation: bool = setting(True, doc="tell look-alike places apart by their "
                                    "features (design §5); false: the lower levels alone")
     ambiguity_margin: float = setting(0.1, ge=0.0, le=1.0, doc="the search's top two "

@@ -21,7 +21,7 @@ from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.backgrounds import views_of
 from daemon.mapping.embedding import embed
 from daemon.mapping.graph import TopologicalMap
-from daemon.mapping.lookalikes import MappedPlace, lookalikes, pair_features
+from daemon.mapping.lookalikes import MappedPlace, likeliest, lookalikes, pair_features
 from daemon.mapping.odometry_chain import OdometryChain
 from daemon.mapping.place import Place, with_cues
 from daemon.mapping.settings import OdometryNoiseSettings
@@ -67,6 +67,10 @@ Seen = tuple[int, UncertainSE2]
 # of the 7 beyond, 6 were 1.3-15 m off.
 CLOSING_MAX_M = 2.0
 
+# Grey reference panoramas kept decoded (90 kB each at 752 x 120): every learn reads the
+# first CROSS_VIEWS places' (its cross background) and its look-alike candidates'.
+REFERENCES_KEPT = 128
+
 
 def _closing(seen: Seen) -> list[Link]:
     """The link from the place the robot is tracked in, when it is not the last place
@@ -94,6 +98,8 @@ class Mapper:
         self._chain: OdometryChain | None = None  # from that place's reference pose
         self._pending: OdometryChain | None = None  # from the reference of a place in work
         self._recent: collections.deque[Odometry] = collections.deque(maxlen=500)
+        self._references: collections.OrderedDict[int, np.ndarray] = \
+            collections.OrderedDict()  # grey, by place id, the last used last
         self.reembed()
 
     def _fill_cues(self) -> None:
@@ -238,7 +244,7 @@ class Mapper:
         with self._lock:
             templates = [PreparedTemplates.of(self.graph.place(q).landmarks.templates())
                          for q in grown]
-        pano = PreparedPanorama.of(to_grey(self.store.reference_panorama(view)))
+        pano = PreparedPanorama.of(self.grey_reference(view))
         values = {q: (mean * n + lrp) / (n + 1) for (q, (mean, n)), lrp in zip(
             grown.items(), FastMatcher().lrps(pano, templates), strict=True)}
         return self._keep_cross_backgrounds(values)
@@ -255,7 +261,7 @@ class Mapper:
         matcher = FastMatcher()
         for v in sorted({v for vs in views.values() for v in vs}):
             users = [q for q in place_ids if v in views[q]]
-            pano = PreparedPanorama.of(to_grey(self.store.reference_panorama(v)))
+            pano = PreparedPanorama.of(self.grey_reference(v))
             for q, lrp in zip(users, matcher.lrps(pano, [templates[q] for q in users]),
                               strict=True):
                 sums[q] += lrp
@@ -285,15 +291,18 @@ class Mapper:
             # carried between them; look-alikes that matter stand farther off.
             near = {p for p, T in self.graph.reached(place_id).items()
                     if math.hypot(T.x, T.y) < settings.lookalike_min_distance_m}
-            candidates = [(p.id, PreparedTemplates.of(p.landmarks.templates()),
-                           _background(p, settings.background_lrp))
-                          for p in self.graph.places if p.id != place_id and p.id not in near]
-        others = {pid: MappedPlace(templates, background,
-                                   to_grey(self.store.reference_panorama(pid)))
-                  for pid, templates, background in candidates}
+            signatures = {p.id: p.signature for p in self.graph.places
+                          if p.id != place_id and p.id not in near}
         margin = place.landmarks.margin
-        reference = to_grey(self.store.reference_panorama(place_id))
-        own_views = [reference, *views]
+        own_views = [self.grey_reference(place_id), *views]
+        with self._lock:
+            candidates = [(self.graph.place(pid), pid) for pid in likeliest(
+                own_views, margin, signatures, settings.lookalike_candidates)
+                if pid in self.graph]
+        others = {pid: MappedPlace(PreparedTemplates.of(p.landmarks.templates()),
+                                   _background(p, settings.background_lrp),
+                                   self.grey_reference(pid))
+                  for p, pid in candidates}
         found = lookalikes(own_views, PreparedTemplates.of(place.landmarks.templates()),
                            _background(place, settings.background_lrp), others,
                            settings.lookalike_margin,
@@ -308,6 +317,21 @@ class Mapper:
                      "%d px at %d", place_id, pair.b_id, pair.a.size, pair.a.col, pair.b.size,
                      pair.b.col)
         return pairs
+
+    def grey_reference(self, place_id: int) -> np.ndarray:
+        """A place's reference panorama in grey, decoded once while it is among the
+        REFERENCES_KEPT used last (a stored panorama never changes)."""
+        with self._lock:
+            grey = self._references.get(place_id)
+            if grey is not None:
+                self._references.move_to_end(place_id)
+                return grey
+        grey = to_grey(self.store.reference_panorama(place_id))
+        with self._lock:
+            self._references[place_id] = grey
+            while len(self._references) > REFERENCES_KEPT:
+                self._references.popitem(last=False)
+        return grey
 
     def add_transition(self, transition: Transition) -> None:
         """A transition measured while localising (a closed cycle, §7.1.3), both ways; the
