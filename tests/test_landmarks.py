@@ -10,7 +10,7 @@ import pytest
 
 from daemon.vision.depth_ekf import BearingOnlyEKF, observation_variance
 from daemon.vision.landmarks import TEMPLATE, centre_bearing
-from daemon.vision.ncc import ncc, ncc_map, ncc_under_light, subpixel_peak
+from daemon.vision.ncc import PreparedImage, ncc, ncc_map, ncc_under_light, subpixel_peak
 from daemon.vision.recognition import (
     FastMatcher,
     PreparedPanorama,
@@ -275,3 +275,25 @@ def test_light_that_saturates_a_template_takes_its_pattern() -> None:
     assert ncc_under_light(dark, (0.5, 1.5)) > 0.99
     assert ncc_under_light(bright, (0.5,)) > 0.99  # dimmer: nothing clips
     assert ncc_under_light(bright, (0.5, 1.5)) < 0.5
+
+
+def test_a_prepared_image_gives_opencvs_best_ncc_flat_parts_and_templates_included() -> None:
+    """PreparedImage.best_ncc (the feature search's, design §5) is the maximum of
+    ncc_map (TM_CCOEFF_NORMED) to float rounding, whatever the template's size."""
+    import cv2
+
+    rng = np.random.default_rng(11)
+    worst = 0.0
+    for k in range(20):
+        image = cv2.GaussianBlur(rng.integers(0, 256, (120, 752)).astype(np.uint8), (5, 5),
+                                 1.0 + k % 3)
+        image[:, 300:340] = 77  # a flat part: its windows match nothing
+        prepared = PreparedImage(image)
+        for size in (16, 24, 32):
+            r, c = int(rng.integers(0, 120 - size)), int(rng.integers(0, 752 - size))
+            template = np.ascontiguousarray(image[r:r + size, c:c + size]) if k % 2 else \
+                rng.integers(0, 256, (size, size)).astype(np.uint8)
+            worst = max(worst, abs(prepared.best_ncc(template)
+                                   - float(ncc_map(image, template).max())))
+    assert worst < 1e-4
+    assert prepared.best_ncc(np.full((16, 16), 9, np.uint8)) == 1.0  # OpenCV's flat rule

@@ -26,7 +26,7 @@ from typing import Literal
 
 import numpy as np
 
-from daemon.vision.ncc import ncc_map
+from daemon.vision.ncc import PreparedImage, ncc_map
 from kernel.panorama import core_of
 
 SIZES = (16, 24, 32)  # square template sides, pixels
@@ -88,23 +88,25 @@ def find_feature(own: list[np.ndarray], other: list[np.ndarray], margin: int) ->
     if not own or not other:
         raise ValueError("a feature needs at least one view of each place")
     reference = core_of(own[0], margin)
+    others = [PreparedImage(v) for v in other]  # each matched by hundreds of candidates
     best: Feature | None = None
     for size in SIZES:
         for col, row in _textured_candidates(reference, size):
             template = np.ascontiguousarray(reference[row:row + size, col:col + size])
-            # Matched in the other place's views one by one (the wrap margin lets a match
-            # straddle the seam) until it cannot beat the best even if it persists
-            # perfectly: an other_ncc of at least 1 - best.score.
-            out_at = math.inf if best is None else 1.0 - best.score
+            # Its worst match in its own place's other views first (small windows), then
+            # the other place's views one by one (the wrap margin lets a match straddle
+            # the seam) until it cannot beat the best: an other_ncc of at least
+            # own_ncc - best.score. Exact: what is dropped would not have been chosen.
+            own_ncc = min((_near(v, margin, template, col, row) for v in own[1:]),
+                          default=1.0)
+            out_at = math.inf if best is None else own_ncc - best.score
             other_ncc = -1.0
-            for v in other:
-                other_ncc = max(other_ncc, float(ncc_map(v, template).max()))
+            for v in others:
+                other_ncc = max(other_ncc, v.best_ncc(template))
                 if other_ncc >= out_at:
                     break
             if other_ncc >= out_at:
                 continue
-            own_ncc = min((_near(v, margin, template, col, row) for v in own[1:]),
-                          default=1.0)
             candidate = Feature(col, row, template, own_ncc, other_ncc)
             if best is None or candidate.score > best.score:
                 best = candidate
