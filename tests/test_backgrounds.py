@@ -71,6 +71,24 @@ def test_the_mapper_measures_each_place_in_the_others_views(tmp_path: Path) -> N
             assert mapper.graph.place(pid).background_cross == pytest.approx(expected)
 
 
+def test_a_map_stored_without_cross_backgrounds_gets_them_when_opened(tmp_path: Path) -> None:
+    """An older map (its places stored before cross backgrounds were kept): the mapper
+    measures them once when it opens the map, each as measured place by place."""
+    rng = np.random.default_rng(6)
+    places = [synthetic_place(rng, label) for label in "abc"]
+    with MapStore.open(tmp_path / "map.db", "abc123") as store:
+        ids = [store.add_place(place).id for place in places]
+        assert all(p.background_cross is None for p in store.load().places)
+        mapper = Mapper(store, OdometryNoiseSettings())
+        matcher = FastMatcher()
+        views = {p: PreparedPanorama.of(to_grey(store.reference_panorama(p))) for p in ids}
+        for pid, place in zip(ids, places, strict=True):
+            templates = PreparedTemplates.of(place.landmarks.templates())
+            expected = np.mean([matcher.lrp(views[q], templates) for q in ids if q != pid])
+            assert store.load().place(pid).background_cross == pytest.approx(expected)
+            assert mapper.graph.place(pid).background_cross == pytest.approx(expected)
+
+
 def test_a_new_view_is_added_to_the_means_it_joins_and_a_full_set_is_left_alone(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """With views limited to 2 other places, the third place learned joins the first

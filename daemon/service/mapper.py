@@ -85,6 +85,8 @@ class Mapper:
         self.store = store
         self.noise = noise
         self._lock = threading.RLock()
+        self._references: collections.OrderedDict[int, np.ndarray] = \
+            collections.OrderedDict()  # grey, by place id, the last used last
         self.graph: TopologicalMap = store.load()
         # Each place's segment (design §6), replaced whole on every change of the map.
         self.segment_of: dict[int, int] = self.graph.segments()
@@ -98,8 +100,6 @@ class Mapper:
         self._chain: OdometryChain | None = None  # from that place's reference pose
         self._pending: OdometryChain | None = None  # from the reference of a place in work
         self._recent: collections.deque[Odometry] = collections.deque(maxlen=500)
-        self._references: collections.OrderedDict[int, np.ndarray] = \
-            collections.OrderedDict()  # grey, by place id, the last used last
         self.reembed()
 
     def _fill_cues(self) -> None:
