@@ -29,6 +29,7 @@ from daemon.service.api import ErrorCode
 from daemon.service.learning import drive_tbl, frame_with_odometry
 from daemon.service.mapper import Link, Seen
 from daemon.service.mapping_session import Event, MappingSession
+from daemon.service.memory import release_free_memory
 from daemon.vision.unwarp import Unwarper
 from hal.base.base import BaseInfo, BaseStatus
 from hal.base.settings import BaseSettings
@@ -258,6 +259,7 @@ class LearnJob:
                 self._reply("error", api.error_fields(outcome.error or ErrorCode.FAILED,
                                                       outcome.message))
             self._on_done(self, outcome)
+            release_free_memory()  # this thread's temporaries (daemon/service/memory.py)
 
 
 def job_settings(settings: TblSettings, extent_m: float | None) -> TblSettings:
