@@ -19,6 +19,7 @@ import zenoh
 from tests.api_schema import check
 from tools.daemon_process import DEFAULT_CONFIG, merge
 from tools.daemon_process import REPO as REPO
+from tools.daemon_process import busy_loops as busy_loops
 from tools.daemon_process import dump_toml as dump_toml
 from tools.daemon_process import free_port as free_port
 
@@ -110,19 +111,6 @@ def wait_for(predicate: Any, timeout_s: float, interval_s: float = 0.05) -> bool
             return True
         time.sleep(interval_s)
     return bool(predicate())
-
-
-@contextlib.contextmanager
-def busy_loops(n: int = 2) -> Iterator[None]:
-    """``n`` processes spinning on the CPU beside the test: a robot's computer is never
-    idle (the tests that must hold under load run inside this)."""
-    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
-    try:
-        yield
-    finally:
-        for p in procs:
-            p.kill()
-            p.wait(10)
 
 
 def ctl(config: Path, *args: str, timeout: float = 240.0) -> subprocess.CompletedProcess[str]:

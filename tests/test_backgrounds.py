@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from daemon.mapping.backgrounds import CROSS_VIEWS, Levels, levels, search_background, views_of
+from daemon.mapping.place import Place
 from daemon.mapping.settings import OdometryNoiseSettings
 from daemon.service.mapper import Mapper
 from daemon.store.sqlite_store import MapStore
@@ -48,6 +49,19 @@ def test_the_cross_estimate_is_re_centred_and_a_measured_background_wins() -> No
     assert levels([bare]) is None
 
 
+def _assert_measured_in_each_others_views(store: MapStore, mapper: Mapper, ids: list[int],
+                                          places: list[Place]) -> None:
+    """Each place's cross background, stored and in the mapper's map, is its mean LRP in
+    the other places' reference views."""
+    matcher = FastMatcher()
+    views = {p: PreparedPanorama.of(to_grey(store.reference_panorama(p))) for p in ids}
+    for pid, place in zip(ids, places, strict=True):
+        templates = PreparedTemplates.of(place.landmarks.templates())
+        expected = np.mean([matcher.lrp(views[q], templates) for q in ids if q != pid])
+        assert store.load().place(pid).background_cross == pytest.approx(expected)
+        assert mapper.graph.place(pid).background_cross == pytest.approx(expected)
+
+
 def test_the_mapper_measures_each_place_in_the_others_views(tmp_path: Path) -> None:
     rng = np.random.default_rng(4)
     places = [synthetic_place(rng, label) for label in ("a", "b", "c")]
@@ -62,13 +76,7 @@ def test_the_mapper_measures_each_place_in_the_others_views(tmp_path: Path) -> N
             ids.append(stored.id)
             changed = mapper.measure_cross_backgrounds(stored.id)
             assert sorted(p.id for p in changed) == ids  # every view set it joins
-        matcher = FastMatcher()
-        views = {p: PreparedPanorama.of(to_grey(store.reference_panorama(p))) for p in ids}
-        for pid, place in zip(ids, places, strict=True):
-            templates = PreparedTemplates.of(place.landmarks.templates())
-            expected = np.mean([matcher.lrp(views[q], templates) for q in ids if q != pid])
-            assert store.load().place(pid).background_cross == pytest.approx(expected)
-            assert mapper.graph.place(pid).background_cross == pytest.approx(expected)
+        _assert_measured_in_each_others_views(store, mapper, ids, places)
 
 
 def test_a_map_stored_without_cross_backgrounds_gets_them_when_opened(tmp_path: Path) -> None:
@@ -80,13 +88,7 @@ def test_a_map_stored_without_cross_backgrounds_gets_them_when_opened(tmp_path: 
         ids = [store.add_place(place).id for place in places]
         assert all(p.background_cross is None for p in store.load().places)
         mapper = Mapper(store, OdometryNoiseSettings())
-        matcher = FastMatcher()
-        views = {p: PreparedPanorama.of(to_grey(store.reference_panorama(p))) for p in ids}
-        for pid, place in zip(ids, places, strict=True):
-            templates = PreparedTemplates.of(place.landmarks.templates())
-            expected = np.mean([matcher.lrp(views[q], templates) for q in ids if q != pid])
-            assert store.load().place(pid).background_cross == pytest.approx(expected)
-            assert mapper.graph.place(pid).background_cross == pytest.approx(expected)
+        _assert_measured_in_each_others_views(store, mapper, ids, places)
 
 
 def test_a_new_view_is_added_to_the_means_it_joins_and_a_full_set_is_left_alone(

@@ -3,10 +3,14 @@ memory read from ``/proc`` (the benchmarks and the end-to-end tests run it this 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import socket
+import subprocess
+import sys
 import tomllib
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -73,3 +77,25 @@ def usage(pid: int) -> ProcessUsage:
         if line.startswith("VmRSS:"):
             rss_kb = int(line.split()[1])
     return ProcessUsage(cpu_s, rss_kb / 1024)
+
+
+def unpinned(proc: subprocess.Popen[bytes]) -> subprocess.Popen[bytes]:
+    """A child process free to run on every core (a benchmark pins itself to one, and a
+    child inherits that; it has started no thread of its own yet)."""
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(proc.pid, range(os.cpu_count() or 1))
+    return proc
+
+
+@contextlib.contextmanager
+def busy_loops(n: int = 2) -> Iterator[None]:
+    """``n`` processes spinning on the CPU, on any core: a robot's computer is never
+    idle (the tests that must hold under load, and the daemon bench's loaded run)."""
+    procs = [unpinned(subprocess.Popen([sys.executable, "-c", "while True: pass"]))
+             for _ in range(n)]
+    try:
+        yield
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait(10)

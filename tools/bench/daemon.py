@@ -33,7 +33,6 @@ from __future__ import annotations
 import contextlib
 import json
 import math
-import os
 import shutil
 import signal
 import statistics
@@ -61,7 +60,14 @@ from kernel.panorama import add_wrap_margin, geometry_checksum, to_grey
 from kernel.se2 import SE2, UncertainSE2
 from tools.bench.global_search import _landmarks
 from tools.bench.timing import original_environment
-from tools.daemon_process import REPO, free_port, usage, write_daemon_config
+from tools.daemon_process import (
+    REPO,
+    busy_loops,
+    free_port,
+    unpinned,
+    usage,
+    write_daemon_config,
+)
 from tools.eval.lockstep import Run, lockstep_config
 from tools.eval.tour_map import tour_points
 
@@ -177,14 +183,6 @@ class Observed:
     changed: threading.Condition = field(default_factory=threading.Condition)
 
 
-def _unpinned(proc: subprocess.Popen[bytes]) -> subprocess.Popen[bytes]:
-    """A child process free to run on every core (this benchmark pins itself to one,
-    and a child inherits that; it has started no thread of its own yet)."""
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(proc.pid, range(os.cpu_count() or 1))
-    return proc
-
-
 @contextlib.contextmanager
 def _daemon(run_dir: Path, overrides: dict[str, Any]
             ) -> Iterator[tuple[subprocess.Popen[bytes], Observed, zenoh.Session]]:
@@ -229,7 +227,7 @@ def _daemon(run_dir: Path, overrides: dict[str, Any]
             session.declare_subscriber(f"placecell/{ROBOT}/events", on_event)]
     log = (run_dir / "daemon.log").open("w")
     seen = Observed(time.monotonic())
-    proc = _unpinned(subprocess.Popen([sys.executable, "-m", "daemon", "--config", str(config)],
+    proc = unpinned(subprocess.Popen([sys.executable, "-m", "daemon", "--config", str(config)],
                                       cwd=REPO, stdout=log, stderr=subprocess.STDOUT,
                                       env=original_environment()))
     try:
@@ -280,7 +278,7 @@ def tour_run(fixture: Fixture, mode: str, *, loaded: bool = False) -> dict[str, 
         "localisation": {"initial_place": 1, "initial_pose": [0.0, 0.0, 0.0]}}
     with contextlib.ExitStack() as stack:
         if loaded:
-            stack.enter_context(_busy_loops(2))
+            stack.enter_context(busy_loops(2))
         _, seen, session = stack.enter_context(_daemon(run_dir, overrides))
         _wait_for_end(session, run_dir)
         with seen.changed:
@@ -314,18 +312,6 @@ def _wait_for_end(session: zenoh.Session, run_dir: Path) -> None:
     tail = (run_dir / "daemon.log").read_text(errors="replace").splitlines()[-30:]
     raise RuntimeError(f"the replay did not end within {WAIT_S:.0f} s; the daemon's log "
                        "ends:\n" + "\n".join(tail))
-
-
-@contextlib.contextmanager
-def _busy_loops(n: int) -> Iterator[None]:
-    procs = [_unpinned(subprocess.Popen([sys.executable, "-c", "while True: pass"]))
-             for _ in range(n)]
-    try:
-        yield
-    finally:
-        for p in procs:
-            p.kill()
-            p.wait(10)
 
 
 def start_run(fixture: Fixture, size: int) -> tuple[float, float]:
