@@ -22,6 +22,7 @@ from tools.daemon_process import REPO as REPO
 from tools.daemon_process import busy_loops as busy_loops
 from tools.daemon_process import dump_toml as dump_toml
 from tools.daemon_process import free_port as free_port
+from tools.daemon_process import listening_session as listening_session
 
 
 def write_config(tmp: Path, overrides: dict[str, Any] | None = None, *,
@@ -79,16 +80,6 @@ def client_session(port: int) -> zenoh.Session:
     conf.insert_json5("mode", '"peer"')
     conf.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')
     conf.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    return zenoh.open(conf)
-
-
-def listening_session(port: int) -> zenoh.Session:
-    """A session listening on 127.0.0.1:``port`` for a daemon configured to connect to
-    it: up before the daemon starts, it hears the daemon's very first messages."""
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
     conf.insert_json5("scouting/multicast/enabled", "false")
     return zenoh.open(conf)
 

@@ -225,7 +225,8 @@ def test_fast_recognition_of_another_place_never_overestimates() -> None:
 def test_exact_ncc_block_matches_opencv() -> None:
     # The climb's compiled 3 x 3 block must give OpenCV's NCC wherever it is placed,
     # up to the last window of the panorama.
-    from daemon.vision.recognition import FLAT_RMS, _block
+    from daemon.vision.ncc import FLAT_RMS
+    from daemon.vision.recognition import _block
 
     pano = _textured((120, 752), 31)
     prepared = PreparedPanorama.of(pano)

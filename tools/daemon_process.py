@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import zenoh
+
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_CONFIG = REPO / "config" / "placecell.toml"
 
@@ -23,6 +25,16 @@ def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+def listening_session(port: int) -> zenoh.Session:
+    """A session listening on 127.0.0.1:``port`` for a daemon configured to connect to
+    it: up before the daemon starts, it hears the daemon's very first messages."""
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(conf)
 
 
 def merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:

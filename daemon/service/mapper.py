@@ -296,13 +296,13 @@ class Mapper:
         margin = place.landmarks.margin
         own_views = [self.grey_reference(place_id), *views]
         with self._lock:
-            candidates = [(self.graph.place(pid), pid) for pid in likeliest(
+            candidates = [self.graph.place(pid) for pid in likeliest(
                 own_views, margin, signatures, settings.lookalike_candidates)
                 if pid in self.graph]
-        others = {pid: MappedPlace(PreparedTemplates.of(p.landmarks.templates()),
-                                   _background(p, settings.background_lrp),
-                                   self.grey_reference(pid))
-                  for p, pid in candidates}
+        others = {p.id: MappedPlace(PreparedTemplates.of(p.landmarks.templates()),
+                                    _background(p, settings.background_lrp),
+                                    self.grey_reference(p.id))
+                  for p in candidates}
         found = lookalikes(own_views, PreparedTemplates.of(place.landmarks.templates()),
                            _background(place, settings.background_lrp), others,
                            settings.lookalike_margin,

@@ -32,7 +32,7 @@ import numba
 import numpy as np
 
 from daemon.vision.landmarks import TEMPLATE, LandmarkSet
-from daemon.vision.ncc import ncc_map
+from daemon.vision.ncc import FLAT_RMS, inverse_norms, ncc_map, window_norms
 from kernel.panorama import add_wrap_margin, core_of
 
 
@@ -68,22 +68,6 @@ def best_ncc_elsewhere(panorama_grey: np.ndarray, margin: int, templates: np.nda
 
 
 COARSE = TEMPLATE // 2  # side of a template at half resolution
-FLAT_RMS = 1e-3  # windows or templates flatter than this (grey levels RMS) match nothing
-
-
-def _window_norms(image: np.ndarray, side: int) -> np.ndarray:
-    """sqrt(Σ I² − (Σ I)² / n) of every side x side window (top-left indexed)."""
-    h, w = image.shape[0] - side + 1, image.shape[1] - side + 1
-    s1 = cv2.boxFilter(image, cv2.CV_64F, (side, side), anchor=(0, 0), normalize=False,
-                       borderType=cv2.BORDER_CONSTANT)[:h, :w]
-    s2 = cv2.boxFilter(image.astype(np.float64) ** 2, cv2.CV_64F, (side, side),
-                       anchor=(0, 0), normalize=False, borderType=cv2.BORDER_CONSTANT)[:h, :w]
-    return np.sqrt(np.maximum(s2 - s1 * s1 / (side * side), 0.0)).astype(np.float32)
-
-
-def _inverse(norms: np.ndarray, floor: float) -> np.ndarray:
-    """1 / norm, and 0 for windows flatter than ``floor`` (they match nothing)."""
-    return np.where(norms > floor, 1.0 / np.maximum(norms, floor), 0.0).astype(np.float32)
 
 
 @dataclass
@@ -108,8 +92,8 @@ class PreparedPanorama:
         for u in range(COARSE):
             for v in range(COARSE):
                 coarse[u * COARSE + v] = small[u:u + h, v:v + w].ravel()
-        return cls(image, _window_norms(image, TEMPLATE), coarse,
-                   _inverse(_window_norms(small, COARSE).ravel(), FLAT_RMS * COARSE),
+        return cls(image, window_norms(image, TEMPLATE), coarse,
+                   inverse_norms(window_norms(small, COARSE).ravel(), FLAT_RMS * COARSE),
                    (h, w))
 
 

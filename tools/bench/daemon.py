@@ -64,6 +64,7 @@ from tools.daemon_process import (
     REPO,
     busy_loops,
     free_port,
+    listening_session,
     unpinned,
     usage,
     write_daemon_config,
@@ -190,23 +191,18 @@ def _daemon(run_dir: Path, overrides: dict[str, Any]
     its zenoh session connected to one this process listens on (so it hears the first
     pose), its log in run_dir."""
     port = free_port()
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
     config = run_dir / "placecell.toml"
     write_daemon_config(config, {
         "robot": {"name": ROBOT},
         "zenoh": {"listen": [f"tcp/127.0.0.1:{free_port()}"],
                   "connect": [f"tcp/127.0.0.1:{port}"]},
         **overrides})
-    session = zenoh.open(conf)
-    seen: Observed | None = None
+    session = listening_session(port)
+    seen = Observed(spawned=0.0)  # set when the process is started
 
     def on_belief(sample: zenoh.Sample) -> None:
         body = json.loads(sample.payload.to_bytes())
         now = time.monotonic()
-        assert seen is not None
         with seen.changed:
             seen.beliefs.append(body)
             seen.arrivals.append(now)
@@ -218,7 +214,6 @@ def _daemon(run_dir: Path, overrides: dict[str, Any]
             seen.changed.notify_all()
 
     def on_event(sample: zenoh.Sample) -> None:
-        assert seen is not None
         with seen.changed:
             seen.events.append(json.loads(sample.payload.to_bytes()))
             seen.changed.notify_all()
@@ -226,7 +221,7 @@ def _daemon(run_dir: Path, overrides: dict[str, Any]
     subs = [session.declare_subscriber(f"placecell/{ROBOT}/belief", on_belief),
             session.declare_subscriber(f"placecell/{ROBOT}/events", on_event)]
     log = (run_dir / "daemon.log").open("w")
-    seen = Observed(time.monotonic())
+    seen.spawned = time.monotonic()
     proc = unpinned(subprocess.Popen([sys.executable, "-m", "daemon", "--config", str(config)],
                                       cwd=REPO, stdout=log, stderr=subprocess.STDOUT,
                                       env=original_environment()))
@@ -249,9 +244,8 @@ def _daemon(run_dir: Path, overrides: dict[str, Any]
 def _wait(seen: Observed, until: Any, what: str, run_dir: Path) -> None:
     with seen.changed:
         if not seen.changed.wait_for(lambda: until(seen), timeout=WAIT_S):
-            tail = (run_dir / "daemon.log").read_text(errors="replace").splitlines()[-30:]
-            raise RuntimeError(f"the daemon never {what} within {WAIT_S:.0f} s; its log "
-                               "ends:\n" + "\n".join(tail))
+            raise RuntimeError(f"the daemon never {what} within {WAIT_S:.0f} s; "
+                               + _log_tail(run_dir))
 
 
 def _run_dir(fixture: Fixture, name: str, map_size: int) -> tuple[Path, dict[str, Any]]:
@@ -309,9 +303,12 @@ def _wait_for_end(session: zenoh.Session, run_dir: Path) -> None:
                 if "end of recording" in str(camera.get("last_error")):
                     return
         time.sleep(0.5)
+    raise RuntimeError(f"the replay did not end within {WAIT_S:.0f} s; " + _log_tail(run_dir))
+
+
+def _log_tail(run_dir: Path) -> str:
     tail = (run_dir / "daemon.log").read_text(errors="replace").splitlines()[-30:]
-    raise RuntimeError(f"the replay did not end within {WAIT_S:.0f} s; the daemon's log "
-                       "ends:\n" + "\n".join(tail))
+    return "its log ends:\n" + "\n".join(tail)
 
 
 def start_run(fixture: Fixture, size: int) -> tuple[float, float]:

@@ -7,14 +7,13 @@ import statistics
 import time
 from collections.abc import Callable
 
-THREAD_SETTINGS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 _ENVIRONMENT = dict(os.environ)  # as this process was started, before pin_to_one_core
 
 
 def pin_to_one_core() -> None:
     """Run the benchmark on one core (and tell OpenCV and BLAS to use one thread: BLAS
     reads its setting when numpy is first imported, so call this before that)."""
-    for name in THREAD_SETTINGS:
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[name] = "1"
     import cv2
 
