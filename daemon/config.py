@@ -18,6 +18,7 @@ from hal.base.settings import BaseSettings
 from hal.camera.settings import CameraSettings
 from hal.registry import BASE_BACKENDS, CAMERA_BACKENDS
 from hal.sim.settings import SimSettings
+from kernel.camera_models import Projection, read_ocamcalib
 from kernel.errors import ConfigError
 from kernel.sensor_settings import MirrorSettings, PanoramaSettings
 from kernel.settings import ROS2_TOPIC, as_dict, build, read_toml, setting
@@ -172,6 +173,16 @@ class PlacecellConfig:
     service: ServiceSettings = setting(default_factory=ServiceSettings)
     log: LogSettings = setting(default_factory=LogSettings)
 
+    @property
+    def projection(self) -> Projection:
+        """How the camera images the world: [mirror], or the [camera.*] section that
+        ``camera.model`` names (kernel/camera_models.py)."""
+        c = self.camera
+        models: dict[str, Projection] = {
+            "mirror": self.mirror, "ocamcalib": c.ocamcalib, "fisheye": c.fisheye,
+            "equirectangular": c.equirectangular, "dual-fisheye": c.dual_fisheye}
+        return models[c.model]
+
     def __post_init__(self) -> None:
         if self.camera.backend not in CAMERA_BACKENDS:
             raise ValueError(
@@ -186,7 +197,17 @@ class PlacecellConfig:
 
 
 def from_dict(data: dict[str, Any]) -> PlacecellConfig:
-    """Validate a parsed TOML document."""
+    """Validate a parsed TOML document. An OCamCalib file named in
+    ``camera.ocamcalib.file`` is read here: its values replace the section's own."""
+    camera = data.get("camera")
+    ocam = camera.get("ocamcalib") if isinstance(camera, dict) else None
+    if (isinstance(camera, dict) and isinstance(ocam, dict) and isinstance(ocam.get("file"), str)
+            and ocam["file"]):
+        try:
+            values = read_ocamcalib(ocam["file"])
+        except ConfigError as e:
+            raise ConfigError(f"camera.ocamcalib.file: {e}") from e
+        data = {**data, "camera": {**camera, "ocamcalib": {**ocam, **values}}}
     return build(PlacecellConfig, data, "config")
 
 

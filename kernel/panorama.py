@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from kernel.angles import TWO_PI, wrap_angle
+from kernel.sensor_settings import MirrorSettings
 
 __all__ = ["TWO_PI", "wrap_angle", "bearing_of_column", "column_of_bearing", "elevation_of_row",
            "row_of_elevation", "add_wrap_margin", "core_of", "to_grey", "geometry_checksum"]
@@ -73,13 +74,19 @@ def to_grey(image: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
 
 
-def geometry_checksum(mirror: object, panorama: object) -> str:
-    """A short digest of everything that defines the panorama geometry (mirror model and
-    panorama settings): the map store refuses a map made with another one (docs/design.md §6)."""
+def geometry_checksum(projection: object, panorama: object) -> str:
+    """A short digest of everything that defines the panorama geometry (the camera model's
+    settings and the panorama's): the map store refuses a map made with another one
+    (docs/design.md §6). The mirror's digest is the one maps had before other cameras."""
     import dataclasses
     import hashlib
     import json
 
-    doc = {"mirror": dataclasses.asdict(mirror),  # type: ignore[call-overload]
-           "panorama": dataclasses.asdict(panorama)}  # type: ignore[call-overload]
+    camera = dataclasses.asdict(projection)  # type: ignore[call-overload]
+    if isinstance(projection, MirrorSettings):
+        doc = {"mirror": camera, "panorama": dataclasses.asdict(panorama)}  # type: ignore[call-overload]
+    else:  # the values, not where they were read from
+        camera = {k: v for k, v in camera.items() if k != "file"}
+        doc = {"camera": {type(projection).__name__: camera},
+               "panorama": dataclasses.asdict(panorama)}  # type: ignore[call-overload]
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]

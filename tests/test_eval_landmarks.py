@@ -18,7 +18,7 @@ from tests.daemon_harness import REPO, venv_bin
 def test_recognise_on_camera_images(tmp_path: Path) -> None:
     """Images made by rendering stand in for photographs of a real mirror camera."""
     c = load(None)
-    renderer = Renderer(load_world("generate:office:1"), c.mirror, c.panorama, (640, 480))
+    renderer = Renderer(load_world("generate:office:1"), c.projection, c.panorama, (640, 480))
     rng = np.random.default_rng(0)
     poses = {"a": (3.0, 10.0, 0.0), "b": (3.0, 10.0, 0.0), "same": (3.0, 10.0, 0.0),
              "near": (3.2, 10.1, 0.1), "elsewhere": (15.0, 4.0, 1.0)}

@@ -99,7 +99,7 @@ def test_a_pose_asked_in_a_place_the_frames_map_lacks_waits_for_the_next_frame()
     rng = np.random.default_rng(11)
     a, b = (dataclasses.replace(synthetic_place(rng), id=k) for k in (1, 2))
     holder = MapHolder(KnownMap.of([a]))
-    localiser = Localiser(cfg.mirror, cfg.panorama, settings=cfg.localisation,
+    localiser = Localiser(cfg.projection, cfg.panorama, settings=cfg.localisation,
                           known_map=holder)
     image = rng.integers(0, 256, (cfg.camera.sim.image_height, cfg.camera.sim.image_width, 3),
                          dtype=np.uint8)

@@ -49,7 +49,7 @@ def _map_with_a_place(path: Path) -> None:
     from kernel.panorama import geometry_checksum
 
     config = load(str(REPO / "config" / "placecell.toml"))
-    with MapStore.open(path, geometry_checksum(config.mirror, config.panorama)) as store:
+    with MapStore.open(path, geometry_checksum(config.projection, config.panorama)) as store:
         store.add_place(synthetic_place(np.random.default_rng(1), "dock"))
 
 

@@ -20,7 +20,7 @@ from tools.eval.lockstep import Run
 def _resumed_at_b(run: Run, acquisition: AcquisitionSettings) -> tuple[Localiser, dict]:
     ids = {p.label: p.id for p in run.mapper.graph.places}
     cfg = run.cfg
-    localiser = Localiser(cfg.mirror, cfg.panorama, acquisition=acquisition,
+    localiser = Localiser(cfg.projection, cfg.panorama, acquisition=acquisition,
                           settings=cfg.localisation, odometry_noise=cfg.odometry,
                           known_map=run.session.holder)  # the map as stored
     localiser.resume(ids["b"], (0.0, 0.0, 0.0), 0.05, 0.05)  # as the daemon's restart does

@@ -43,7 +43,7 @@ def _drive_back_past_a(tmp_path: Path, office_map: OfficeMap, candidates: int
         ids = {p.label: p.id for p in run.mapper.graph.places}
         # The localiser knows a and c only: nothing joins them.
         known = KnownMap.of([run.mapper.graph.place(ids["a"]), run.mapper.graph.place(ids["c"])])
-        localiser = Localiser(cfg.mirror, cfg.panorama, acquisition=acquisition,
+        localiser = Localiser(cfg.projection, cfg.panorama, acquisition=acquisition,
                               settings=cfg.localisation, odometry_noise=cfg.odometry,
                               known_map=MapHolder(known))
         localiser.watch_place(ids["c"])

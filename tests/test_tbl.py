@@ -83,7 +83,7 @@ def test_learning_in_the_artificial_corridor() -> None:
     config = lockstep_config(world=CORRIDOR, start_pose=[0.0, 0.0, 0.0])
     camera, base, robot = _devices(config)
     seen: list[Progress] = []
-    tbl = run_tbl(camera, base, Unwarper(config.mirror, config.panorama), TblSettings(),
+    tbl = run_tbl(camera, base, Unwarper(config.projection, config.panorama), TblSettings(),
                   progress=seen.append)
     landmarks, scored = tbl.result(), tbl.scored()
     assert len(landmarks.landmarks) == 16 and len(scored.landmarks) == 32
@@ -131,7 +131,7 @@ def test_learning_on_a_differential_base_in_the_artificial_corridor() -> None:
                            base_sim={"kinematics": "differential"})
     camera, base, robot = _devices(config)
     seen: list[Progress] = []
-    landmarks = run_tbl(camera, base, Unwarper(config.mirror, config.panorama), TblSettings(),
+    landmarks = run_tbl(camera, base, Unwarper(config.projection, config.panorama), TblSettings(),
                         progress=seen.append).result()
     assert len(landmarks.landmarks) == 16
     assert {"turn to +y", "+y", "turn back"} <= {p.phase for p in seen}
@@ -147,7 +147,7 @@ def test_given_candidates_are_tracked_instead_of_static_selection() -> None:
     tracked and kept as they are; none at all is refused before the robot moves."""
     config = lockstep_config(world=CORRIDOR, start_pose=[0.0, 0.0, 0.0])
     camera, base, robot = _devices(config)
-    unwarper = Unwarper(config.mirror, config.panorama)
+    unwarper = Unwarper(config.projection, config.panorama)
     with pytest.raises(LearningError, match="no landmark candidates"):
         run_tbl(camera, base, unwarper, TblSettings(),
                 choose=lambda first, second, margin: LandmarkSet((), 720, margin))
@@ -169,7 +169,7 @@ def test_refused_when_the_base_cannot_move() -> None:
     config = with_sections(lockstep_config(world=CORRIDOR), base_sim={"can_move": False})
     camera, base, _ = _devices(config)
     with pytest.raises(LearningError, match="cannot move"):
-        run_tbl(camera, base, Unwarper(config.mirror, config.panorama), TblSettings())
+        run_tbl(camera, base, Unwarper(config.projection, config.panorama), TblSettings())
 
 
 def test_abort_stops_the_robot_and_returns_nothing() -> None:
@@ -182,7 +182,7 @@ def test_abort_stops_the_robot_and_returns_nothing() -> None:
             abort.set()
 
     with pytest.raises(LearningAbortedError):
-        run_tbl(camera, base, Unwarper(config.mirror, config.panorama), TblSettings(),
+        run_tbl(camera, base, Unwarper(config.projection, config.panorama), TblSettings(),
                 progress=progress, abort=abort)
     robot.advance_to(robot._t_ns + int(2e9))
     assert not robot.status().moving
@@ -195,7 +195,7 @@ def test_refused_when_frames_stop(tmp_path: Path) -> None:
     config = lockstep_config(scenario=str(scenario), realtime=True)
     camera, base, robot = _devices(config)
     with pytest.raises(LearningError, match="frames stopped"):
-        run_tbl(camera, base, Unwarper(config.mirror, config.panorama),
+        run_tbl(camera, base, Unwarper(config.projection, config.panorama),
                 TblSettings(frame_timeout_s=0.5))
     robot.advance_to(robot.wall_time_ns() + int(2e9))
     assert not robot.status().moving  # stopped after the refusal
@@ -234,7 +234,7 @@ def test_a_leg_the_base_did_not_drive_fails_the_learn_before_anything_is_stored(
     settings = TblSettings()
     with pytest.raises(LearningError, match=r"leg -y: .* driven of \(\+0.000, -0.500\)"):
         drive_tbl(DeviceSensors(camera, base, settings, 0.5), mover,
-                  Unwarper(config.mirror, config.panorama), settings)
+                  Unwarper(config.projection, config.panorama), settings)
     assert mover.moves == 7
     robot.advance_to(robot._t_ns + int(2e9))
     assert not robot.status().moving

@@ -43,9 +43,9 @@ def column_shift(a: np.ndarray, b: np.ndarray) -> float:
 ])
 def test_round_trip_psnr_and_bearing(spec: str, pose: tuple[float, float, float]) -> None:
     c = load(None)
-    renderer = Renderer(load_world(spec), c.mirror, c.panorama, (640, 480))
+    renderer = Renderer(load_world(spec), c.projection, c.panorama, (640, 480))
     direct = renderer.panorama(pose)
-    unwarped = core_of(Unwarper(c.mirror, c.panorama).unwarp(renderer.donut(pose)),
+    unwarped = core_of(Unwarper(c.projection, c.panorama).unwarp(renderer.donut(pose)),
                        c.panorama.wrap_margin)
     assert unwarped.shape == direct.shape == (120, 720, 3)
     assert psnr(direct, unwarped) >= 28.0
@@ -78,8 +78,8 @@ def _marker_room() -> World:
 def test_panorama_columns_look_along_their_bearings() -> None:
     """A marker ahead shows at bearing 0 (column W/2), one on the left at +90° (W/4)."""
     c = load(None)
-    renderer = Renderer(_marker_room(), c.mirror, c.panorama, (640, 480))
-    pano = core_of(Unwarper(c.mirror, c.panorama).unwarp(renderer.donut((0.0, 0.0, 0.0))),
+    renderer = Renderer(_marker_room(), c.projection, c.panorama, (640, 480))
+    pano = core_of(Unwarper(c.projection, c.panorama).unwarp(renderer.donut((0.0, 0.0, 0.0))),
                    c.panorama.wrap_margin)
     grey = cv2.cvtColor(pano, cv2.COLOR_BGR2GRAY).astype(float)
     dark = (grey < 60).sum(axis=0)  # marker cells are black on a light wall
@@ -108,13 +108,13 @@ def test_hyperboloid_radius_grows_with_elevation() -> None:
     phi = np.radians(np.linspace(-60, 30, 50))
     r = hyperboloid_radius(phi, c.mirror.a_m, c.mirror.b_m, c.mirror.focal_px)
     assert np.all(np.diff(r) > 0)
-    r_bottom, r_top = MirrorModel(c.mirror, c.panorama).row_radius_range()
+    r_bottom, r_top = MirrorModel(c.projection, c.panorama).row_radius_range()
     assert c.mirror.r_inner_px <= r_bottom < r_top <= c.mirror.r_outer_px
 
 
 def test_unwarp_rejects_bad_images_and_knows_floor_distances() -> None:
     c = load(None)
-    u = Unwarper(c.mirror, c.panorama)
+    u = Unwarper(c.projection, c.panorama)
     with pytest.raises(ValueError, match="uint8"):
         u.unwarp(np.zeros((480, 640), np.float32))
     d = u.floor_distance_of_rows()

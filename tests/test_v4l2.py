@@ -46,7 +46,7 @@ def video(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[np.ndarr
     """A 20-frame MJPG video of rendered mirror images: what a camera would deliver."""
     path = tmp_path_factory.mktemp("v4l2") / "mirror.avi"
     c = load(None)
-    renderer = Renderer(load_world("generate:office:1"), c.mirror, c.panorama, (640, 480))
+    renderer = Renderer(load_world("generate:office:1"), c.projection, c.panorama, (640, 480))
     frames = [renderer.donut((3.0 + 0.05 * i, 10.0, 0.0)) for i in range(20)]
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"MJPG"), 15.0, (640, 480))
     assert writer.isOpened()

@@ -19,7 +19,7 @@ REPO = Path(__file__).resolve().parent.parent
 def _pano(spec: str, pose: tuple[float, float, float] | None = None) -> np.ndarray:
     c = load(None)
     world = load_world(spec)
-    return Renderer(world, c.mirror, c.panorama, (640, 480)).panorama(pose or world.start_pose)
+    return Renderer(world, c.projection, c.panorama, (640, 480)).panorama(pose or world.start_pose)
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -106,7 +106,7 @@ def test_bad_specs() -> None:
 def test_people_occlude_and_floor_mask_is_floor() -> None:
     c = load(None)
     world = load_world("generate:open-room:1")
-    r = Renderer(world, c.mirror, c.panorama, (640, 480))
+    r = Renderer(world, c.projection, c.panorama, (640, 480))
     x, y, _ = world.start_pose
     pose = (x, y, 0.0)
     person = Person(x + 1.0, y)  # one metre straight ahead

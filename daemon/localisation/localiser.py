@@ -65,10 +65,11 @@ from daemon.vision.local_space import CAP_M, LocalSpace, match_many
 from daemon.vision.recognition import FastMatcher, PreparedPanorama
 from daemon.vision.signature import signature, similarity
 from daemon.vision.unwarp import Unwarper
+from kernel.camera_models import Projection
 from kernel.errors import PlacecellError
 from kernel.panorama import core_of, to_grey
 from kernel.se2 import SE2, UncertainSE2
-from kernel.sensor_settings import MirrorSettings, PanoramaSettings
+from kernel.sensor_settings import PanoramaSettings
 from kernel.types import Frame, Odometry
 
 __all__ = ["Belief", "BeliefState", "Localiser", "PlaceScore"]
@@ -125,14 +126,14 @@ class Localiser:
     # motion while the base is silent).
     ODOMETRY_STALE_NS = 250_000_000
 
-    def __init__(self, mirror: MirrorSettings, panorama: PanoramaSettings,
+    def __init__(self, projection: Projection, panorama: PanoramaSettings,
                  acquisition: AcquisitionSettings | None = None,
                  settings: LocalisationSettings | None = None,
                  odometry_noise: OdometryNoiseSettings | None = None,
                  known_map: MapHolder | None = None) -> None:
         """``known_map``: the map's holder, whose owner (the service's MappingSession)
         changes it; the localiser only reads it (daemon/localisation/known_map.py)."""
-        self.unwarper = Unwarper(mirror, panorama)
+        self.unwarper = Unwarper(projection, panorama)
         self.settings = settings or LocalisationSettings()
         self.odometry_noise = odometry_noise or OdometryNoiseSettings()
         self.odometry = OdometryBuffer()

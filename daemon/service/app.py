@@ -86,7 +86,7 @@ class Daemon:
         except BaseException:
             self.map.close()
             raise
-        self._unwarper = Unwarper(config.mirror, config.panorama)
+        self._unwarper = Unwarper(config.projection, config.panorama)
         self._map_queries = MapQueries(self.robot, self.mapper)
         self._job_lock = threading.Lock()
         self._job: LearnJob | None = None

@@ -29,7 +29,7 @@ def open_map(config: PlacecellConfig) -> OpenedMap:
     ``[map] if_unwritable = "localisation"``; otherwise MapStoreError, naming the file
     and what to do. Bad files (a directory, an empty file, damage, another geometry)
     raise MapStoreError whatever the mode, the file left as it was."""
-    geometry = geometry_checksum(config.mirror, config.panorama)
+    geometry = geometry_checksum(config.projection, config.panorama)
     path = config.map.path
     try:
         return OpenedMap(MapStore.open(path, geometry), None)

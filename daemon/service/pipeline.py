@@ -31,7 +31,7 @@ def make_localiser(config: PlacecellConfig, known_map: MapHolder, graph: Topolog
     """A Localiser reading ``known_map`` (whose owner keeps it in step with ``graph``,
     the map as stored), with the floor model stored with the map, started at
     ``[localisation] initial_place`` / ``initial_pose`` when one is configured."""
-    localiser = Localiser(config.mirror, config.panorama, acquisition=acquisition,
+    localiser = Localiser(config.projection, config.panorama, acquisition=acquisition,
                           settings=config.localisation, odometry_noise=config.odometry,
                           known_map=known_map)
     if graph.floor is not None:

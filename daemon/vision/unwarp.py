@@ -1,4 +1,4 @@
-"""Look-up-table unwarping of the raw donut image into the cylindrical panorama (§3.7.2).
+"""Look-up-table unwarping of the raw image into the cylindrical panorama (§3.7.2).
 
 The map from every panorama pixel (including the wrap margin) to its raw image point is
 computed once per configuration; each frame is then one ``cv2.remap``.
@@ -11,18 +11,19 @@ import math
 import cv2
 import numpy as np
 
-from kernel.mirror import MirrorModel
+from kernel.camera_models import Projection, camera_model
 from kernel.panorama import bearing_of_column, elevation_of_row, geometry_checksum
-from kernel.sensor_settings import MirrorSettings, PanoramaSettings
+from kernel.sensor_settings import PanoramaSettings
 
 
 class Unwarper:
-    """Raw mirror image -> panorama of shape ``(H, W + 2m[, 3])``."""
+    """Raw camera image -> panorama of shape ``(H, W + 2m[, 3])``, whichever the camera
+    model (kernel/camera_models.py)."""
 
-    def __init__(self, mirror: MirrorSettings, panorama: PanoramaSettings) -> None:
-        self.mirror = mirror
+    def __init__(self, projection: Projection, panorama: PanoramaSettings) -> None:
+        self.projection = projection
         self.panorama = panorama
-        self.model = MirrorModel(mirror, panorama)
+        self.model = camera_model(projection, panorama)
         H, W, m = panorama.height, panorama.width, panorama.wrap_margin
         rows = np.arange(H, dtype=float)[:, None]
         cols = (np.arange(W + 2 * m) - m) % W  # array column -> core column
@@ -31,6 +32,9 @@ class Unwarper:
                                       np.broadcast_to(bearings, (H, W + 2 * m)))
         u = np.where(np.isfinite(u), u, -1.0)
         v = np.where(np.isfinite(v), v, -1.0)
+        # A frame whose left and right edges meet (equirectangular) is read across them.
+        self._border = (cv2.BORDER_WRAP if getattr(self.model, "wraps_horizontally", False)
+                        else cv2.BORDER_CONSTANT)
         # Fixed-point maps: remap's fastest path.
         self._map1, self._map2 = cv2.convertMaps(u.astype(np.float32), v.astype(np.float32),
                                                  cv2.CV_16SC2)
@@ -41,12 +45,12 @@ class Unwarper:
             raise ValueError(f"raw image must be uint8 (h, w) or (h, w, 3), got {raw.dtype} "
                              f"{raw.shape}")
         return cv2.remap(raw, self._map1, self._map2, interpolation=cv2.INTER_LINEAR,
-                         borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+                         borderMode=self._border, borderValue=0)
 
     def geometry_checksum(self) -> str:
-        """Digest of the mirror and panorama settings that define this panorama geometry
-        (stored with a map, docs/design.md §6)."""
-        return geometry_checksum(self.mirror, self.panorama)
+        """Digest of the camera model's and panorama's settings that define this panorama
+        geometry (stored with a map, docs/design.md §6)."""
+        return geometry_checksum(self.projection, self.panorama)
 
     def floor_distance_of_rows(self) -> np.ndarray:
         """Horizontal distance (m) to the floor point seen by each row; inf at or above the

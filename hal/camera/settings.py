@@ -5,6 +5,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+from kernel.sensor_settings import (
+    CameraModelName,
+    DualFisheyeSettings,
+    EquirectangularSettings,
+    FisheyeSettings,
+    OcamcalibSettings,
+)
 from kernel.settings import ROS2_TOPIC, setting
 
 
@@ -70,3 +77,11 @@ class CameraSettings:
     replay: ReplayCameraSettings = setting(default_factory=ReplayCameraSettings)
     ros2: Ros2CameraSettings = setting(default_factory=Ros2CameraSettings)
     encoding: Literal["bgr", "grey"] = setting("bgr", doc="colour layout handed to the daemon")
+    # How the camera images the world (kernel/camera_models.py, design §2): the mirror of
+    # [mirror], or one of the sections below.
+    model: CameraModelName = setting(
+        "mirror", doc="mirror | ocamcalib | fisheye | equirectangular | dual-fisheye")
+    ocamcalib: OcamcalibSettings = setting(default_factory=OcamcalibSettings)
+    fisheye: FisheyeSettings = setting(default_factory=FisheyeSettings)
+    equirectangular: EquirectangularSettings = setting(default_factory=EquirectangularSettings)
+    dual_fisheye: DualFisheyeSettings = setting(default_factory=DualFisheyeSettings)

@@ -33,7 +33,7 @@ def build_sim_robot(config: Any, scenario: Scenario | None = None, *,
         start = scenario.start_pose
     elif not sim.scenario and tuple(sim.start_pose) == (0.0, 0.0, 0.0):
         start = world.start_pose  # the world's own start when none is configured
-    renderer = Renderer(world, config.mirror, config.panorama,
+    renderer = Renderer(world, config.projection, config.panorama,
                         (camera_settings.image_width, camera_settings.image_height)
                         ) if camera else None
     robot = SimRobot(renderer, camera_settings, base, seed=sim.seed, realtime=sim.realtime,

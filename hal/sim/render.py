@@ -19,6 +19,7 @@ import numpy as np
 
 from hal.sim import textures
 from hal.sim.world import World
+from kernel.camera_models import Projection, camera_model
 from kernel.mirror import MirrorModel, hyperboloid_radius
 from kernel.panorama import bearing_of_column
 from kernel.sensor_settings import MirrorSettings, PanoramaSettings
@@ -48,13 +49,13 @@ def _pack(bgr: np.ndarray) -> np.ndarray:
 
 
 class Renderer:
-    def __init__(self, world: World, mirror: MirrorSettings, panorama: PanoramaSettings,
+    def __init__(self, world: World, projection: Projection, panorama: PanoramaSettings,
                  image_size: tuple[int, int]) -> None:
         self.world = world
-        self.mirror = mirror
+        self.projection = projection
         self.pano = panorama
         self.image_size = image_size
-        self.model = MirrorModel(mirror, panorama)
+        self.model = camera_model(projection, panorama)
         self._build_geometry()
         self._carpet = _pack(textures.floor(world.floor_texture, world.floor_colour,
                                             world.texture_seed))
@@ -289,8 +290,13 @@ class Renderer:
 
     # ---------------------------------------------------------------- donut
     def _build_donut_map(self) -> None:
-        """Raw pixel -> (row, col) in a band panorama covering r_inner..r_outer."""
-        m = self.mirror
+        """Raw pixel -> (row, col) in a band panorama covering what the camera sees."""
+        if not isinstance(self.projection, MirrorSettings):
+            self._build_model_map()
+            return
+        m = self.projection
+        model = self.model
+        assert isinstance(model, MirrorModel)
         w, h = self.image_size
         self._band_cols = self.pano.width * SUPERSAMPLE
         # One band row per pixel of radial extent: the raw image's own radial resolution.
@@ -299,7 +305,7 @@ class Renderer:
         du, dv = u - m.center_x_px, m.center_y_px - v
         r = np.hypot(du, dv)
         alpha = np.arctan2(dv, du)
-        bearing = self.model.bearing_of_image_angle(alpha)
+        bearing = model.bearing_of_image_angle(alpha)
         col = np.mod((math.pi - np.asarray(bearing)) * self._band_cols / (2 * math.pi) - 0.5,
                      self._band_cols)
         if m.model == "hyperboloid":
@@ -313,9 +319,9 @@ class Renderer:
             row = (self._band_top - phi) * self._band_rows / (
                 self._band_top - self._band_bottom) - 0.5
         else:  # polynomial: the band is the configured one, rows from the radius polynomial
-            self._band_top, self._band_bottom = self.model.top, self.model.bottom
+            self._band_top, self._band_bottom = model.top, model.bottom
             rows = np.linspace(-0.5, self.pano.height - 0.5, 2000)
-            radii = self.model.radius_of_row(rows)
+            radii = model.radius_of_row(rows)
             order = np.argsort(radii)
             row = (np.interp(r, radii[order], rows[order]) + 0.5) * (
                 self._band_rows / self.pano.height) - 0.5
@@ -325,6 +331,34 @@ class Renderer:
         row = np.where(r < m.r_inner_px, float(self._band_rows), row)
         row = np.where(r > m.r_outer_px, self._band_rows + 2.0, row)
         self._map_x = np.asarray(col, np.float32)
+        self._map_y = np.asarray(row, np.float32)
+
+    BAND_ROWS_MAX = 720
+
+    def _build_model_map(self) -> None:
+        """The same for any camera model (kernel/camera_models.py): the band spans the
+        elevations the camera sees, at half the panorama's row step (at most
+        BAND_ROWS_MAX rows); pixels that see nothing of the world are black."""
+        w, h = self.image_size
+        u, v = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
+        bearing, phi = self.model.direction_of_point(u, v)
+        seen = np.isfinite(phi)
+        if not seen.any():
+            raise ValueError("the camera model sees nothing of the world in a "
+                             f"{w} x {h} image")
+        limit = math.radians(89.5)
+        self._band_top = min(float(np.max(phi[seen])), limit)
+        self._band_bottom = max(float(np.min(phi[seen])), -limit)
+        step = (self.model.top - self.model.bottom) / self.pano.height / 2.0
+        self._band_rows = min(self.BAND_ROWS_MAX, int(math.ceil(
+            (self._band_top - self._band_bottom) / step)))
+        self._band_cols = self.pano.width * SUPERSAMPLE
+        col = np.mod((math.pi - np.asarray(bearing)) * self._band_cols / (2 * math.pi) - 0.5,
+                     self._band_cols)
+        row = (self._band_top - np.clip(phi, self._band_bottom, self._band_top)) * (
+            self._band_rows / (self._band_top - self._band_bottom)) - 0.5
+        row = np.where(seen, row, self._band_rows + 2.0)
+        self._map_x = np.asarray(np.where(seen, col, 0.0), np.float32)
         self._map_y = np.asarray(row, np.float32)
 
     NOISE_FIXED_POINT = 16.0

@@ -120,7 +120,7 @@ def _other_offices(count: int) -> Iterator[tuple[int, Place, UncertainSE2 | None
     step_cov = np.diag([0.01, 0.01, 0.001])
     while made < count:
         world = load_world(f"generate:office:{seed}")
-        renderer = Renderer(world, cfg.mirror, cfg.panorama, (640, 480))
+        renderer = Renderer(world, cfg.projection, cfg.panorama, (640, 480))
         previous: tuple[float, float] | None = None
         for x, y in tour_points(world, 0.5):
             if made == count:
@@ -141,7 +141,7 @@ def _grown_map(learned: Path, path: Path, size: int) -> None:
     daemon stores (backgrounds measured as the mapper does on opening)."""
     shutil.copyfile(learned, path)
     cfg = load(None)
-    with MapStore.open(path, geometry_checksum(cfg.mirror, cfg.panorama)) as store:
+    with MapStore.open(path, geometry_checksum(cfg.projection, cfg.panorama)) as store:
         last = None
         for _, place, step in _other_offices(size - len(store.load())):
             links: list[tuple[int, UncertainSE2, str]] = \

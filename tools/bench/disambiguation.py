@@ -32,7 +32,7 @@ VIEWS = 40
 def run(repeats: int) -> dict[str, Any]:
     config = load(None)
     margin = config.panorama.wrap_margin
-    renderer = Renderer(load_world(WORLD), config.mirror, config.panorama, (640, 480))
+    renderer = Renderer(load_world(WORLD), config.projection, config.panorama, (640, 480))
 
     def view(x: float, y: float, yaw: float) -> np.ndarray:
         return to_grey(add_wrap_margin(renderer.panorama((x, y, yaw)), margin))

@@ -73,7 +73,7 @@ def _places(count: int) -> tuple[list[Place], list[tuple[str, tuple[float, float
     seed = 1
     while len(places) < count:
         world = f"generate:office:{seed}"
-        renderer = Renderer(load_world(world), config.mirror, config.panorama, (640, 480))
+        renderer = Renderer(load_world(world), config.projection, config.panorama, (640, 480))
         for x, y in tour_points(load_world(world), 0.5):
             if len(places) == count:
                 break
@@ -91,7 +91,7 @@ def decision_ms(places: list[Place], poses: list[tuple[str, tuple[float, float, 
     """(median ms, mean frames, mean share of the map recognised) to a decision, and the
     share of decisions that chose a right place (within 0.5 m of the nearest one)."""
     config = load(None)
-    localiser = Localiser(config.mirror, config.panorama, settings=LocalisationSettings(),
+    localiser = Localiser(config.projection, config.panorama, settings=LocalisationSettings(),
                           known_map=MapHolder(KnownMap.of(places)))
     rng = np.random.default_rng(0)
     renderers: dict[str, Renderer] = {}
@@ -100,7 +100,7 @@ def decision_ms(places: list[Place], poses: list[tuple[str, tuple[float, float, 
     for k in range(repeats + 1):  # the first compiles and warms up
         world, (x, y, _) = poses[int(rng.integers(len(poses)))]
         if world not in renderers:
-            renderers[world] = Renderer(load_world(world), config.mirror, config.panorama,
+            renderers[world] = Renderer(load_world(world), config.projection, config.panorama,
                                         (640, 480))
         view = (x + 0.1, y - 0.1)
         raw = renderers[world].donut((*view, float(rng.uniform(-3, 3))))

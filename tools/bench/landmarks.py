@@ -40,9 +40,9 @@ def map_and_path() -> tuple[list[LandmarkSet], list[np.ndarray], np.ndarray, int
     """The ``PLACES`` places (static selection, the 16 best), the ``FRAMES`` grey
     panoramas of the path, a frame near place 0, and the panorama's wrap margin."""
     config = load(None)
-    renderer = Renderer(load_world("generate:office:1"), config.mirror, config.panorama,
+    renderer = Renderer(load_world("generate:office:1"), config.projection, config.panorama,
                         (640, 480))
-    unwarper = Unwarper(config.mirror, config.panorama)
+    unwarper = Unwarper(config.projection, config.panorama)
     margin = config.panorama.wrap_margin
     rng = np.random.default_rng(0)
 

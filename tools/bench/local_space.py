@@ -29,9 +29,9 @@ def run(repeats: int) -> dict[str, Any]:
     config = load(None)
     world = load_world(WORLD)
     cam = config.camera.sim
-    renderer = Renderer(world, config.mirror, config.panorama,
+    renderer = Renderer(world, config.projection, config.panorama,
                         (cam.image_width, cam.image_height))
-    unwarper = Unwarper(config.mirror, config.panorama)
+    unwarper = Unwarper(config.projection, config.panorama)
     raw = renderer.donut(world.start_pose, noise_sigma=cam.noise_sigma,
                          rng=np.random.default_rng(1))
     core = core_of(unwarper.unwarp(raw), config.panorama.wrap_margin)

@@ -38,9 +38,9 @@ VIEWS = 12  # distinct rendered views, cycled
 def _views() -> list[Place]:
     cfg = load(None)
     world = load_world("generate:office:1")
-    renderer = Renderer(world, cfg.mirror, cfg.panorama,
+    renderer = Renderer(world, cfg.projection, cfg.panorama,
                         (cfg.camera.sim.image_width, cfg.camera.sim.image_height))
-    unwarper = Unwarper(cfg.mirror, cfg.panorama)
+    unwarper = Unwarper(cfg.projection, cfg.panorama)
     rng = np.random.default_rng(0)
     places = []
     for i in range(VIEWS):

@@ -21,7 +21,7 @@ from tools.bench.timing import median_seconds
 def run(repeats: int) -> dict[str, float]:
     config = load(None)
     world = load_world("generate:office:1")
-    renderer = Renderer(world, config.mirror, config.panorama, (640, 480))
+    renderer = Renderer(world, config.projection, config.panorama, (640, 480))
     poses = itertools.cycle([(3.0 + 0.5 * i, 10.0, 0.1 * i) for i in range(20)])
     rng = np.random.default_rng(0)
 
@@ -29,7 +29,7 @@ def run(repeats: int) -> dict[str, float]:
         renderer.donut(next(poses), noise_sigma=2.0, rng=rng)
 
     render_s = median_seconds(render, repeats, inner=10)
-    unwarper = Unwarper(config.mirror, config.panorama)
+    unwarper = Unwarper(config.projection, config.panorama)
     raw = renderer.donut((3.0, 10.0, 0.0), noise_sigma=2.0, rng=rng)
     unwarp_s = median_seconds(lambda: unwarper.unwarp(raw), repeats, inner=50)
     return {"render_fps": round(1.0 / render_s, 1), "unwarp_ms": round(unwarp_s * 1e3, 3)}

@@ -16,6 +16,7 @@ import logging
 import sys
 from typing import Any
 
+from kernel.camera_models import MODEL_NAMES
 from kernel.errors import PlacecellError
 
 # experiment -> (module, default world kind, one-line help)
@@ -65,10 +66,16 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--seed", type=int, default=1, help="seed of the experiment's randomness")
         p.add_argument("--json", action="store_true", help="print one JSON object")
         p.add_argument("--plots", metavar="DIR", help="write PNG figures of the experiment here")
+        p.add_argument("--camera-model", choices=MODEL_NAMES, default="mirror",
+                       help="the simulated camera and the daemon's camera model "
+                       "(tools/eval/cameras.py)")
         importlib.import_module(module_name).add_arguments(p)
     args = parser.parse_args(argv)
     if args.plots and not getattr(importlib.import_module(args._module), "DRAWS_PLOTS", False):
         parser.error(f"{args.experiment} draws no figures yet: drop --plots")
+    if args.camera_model != "mirror" and not getattr(importlib.import_module(args._module),
+                                                     "CAMERA_MODELS", False):
+        parser.error(f"{args.experiment} runs on the mirror camera only: drop --camera-model")
     logging.basicConfig(level=logging.WARNING if args.json else logging.INFO,
                         format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
     try:
@@ -80,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
         "experiment": args.experiment,
         "world": result.get("world", {"kind": args.world_kind, "seed": args.world_seed}),
         "seed": args.seed,
-        "config": result.get("config", {}),
+        "config": {**result.get("config", {}), "camera_model": args.camera_model},
         "metrics": result["metrics"],
     }
     if args.json:

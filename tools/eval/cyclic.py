@@ -51,6 +51,7 @@ from tools.eval.lockstep import (
 )
 
 DRAWS_PLOTS = True  # world-frame paths (estimate, truth, odometry), error per frame
+CAMERA_MODELS = True  # --camera-model M: any of kernel/camera_models.py MODEL_NAMES
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -94,7 +95,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     world = f"generate:{args.world_kind}:{args.world_seed}"
     settings = localisation_settings(base.localisation, args)
     start = tuple(args.start) if args.start else load_world(world).start_pose
-    cfg = lockstep_config(args.seed, world=world, start_pose=start, localisation=settings)
+    cfg = lockstep_config(args.seed, world=world, start_pose=start, localisation=settings,
+                          camera_model=args.camera_model)
     spacing = args.loop_m / args.places
     stops = [spacing * k for k in range(1, args.places)]
     closed: list[Transition] = []

@@ -107,9 +107,9 @@ class _Eye:
     """One world's camera through the daemon's unwarping: colour core panoramas."""
 
     def __init__(self, world: World, config: Any, rng: np.random.Generator) -> None:
-        self.renderer = Renderer(world, config.mirror, config.panorama,
+        self.renderer = Renderer(world, config.projection, config.panorama,
                                  (config.camera.sim.image_width, config.camera.sim.image_height))
-        self.unwarper = Unwarper(config.mirror, config.panorama)
+        self.unwarper = Unwarper(config.projection, config.panorama)
         self.margin = config.panorama.wrap_margin
         self.noise = config.camera.sim.noise_sigma
         self.rng = rng
@@ -204,7 +204,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         raise SystemExit(f"placecell-eval floor: unknown floor {unknown[0] if unknown else ''!r}"
                          f" (known: {', '.join(FLOORS)})")
     base = load_world(f"generate:{args.world_kind}:{args.world_seed}")
-    unwarper = Unwarper(config.mirror, config.panorama)
+    unwarper = Unwarper(config.projection, config.panorama)
     horizon = int(math.floor(unwarper.horizon_row()))
     rng = np.random.default_rng(args.seed)
     poses = free_poses(base, args.poses, rng)

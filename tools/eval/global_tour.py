@@ -45,6 +45,8 @@ from kernel.se2 import SE2
 from tools.eval.lockstep import add_backends_argument
 from tools.eval.tour_map import Point, add_map_arguments, drive_to, mapped_run, right_place
 
+CAMERA_MODELS = True  # --camera-model M: any of kernel/camera_models.py MODEL_NAMES
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_map_arguments(p, places=50)

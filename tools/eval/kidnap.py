@@ -30,6 +30,8 @@ from daemon.localisation.belief import Belief
 from tools.eval.lockstep import Run
 from tools.eval.tour_map import Point, add_map_arguments, mapped_run, right_place
 
+CAMERA_MODELS = True  # --camera-model M: any of kernel/camera_models.py MODEL_NAMES
+
 START_FRAMES = 5
 
 

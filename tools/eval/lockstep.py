@@ -45,6 +45,7 @@ from kernel.panorama import geometry_checksum
 from kernel.se2 import SE2
 from kernel.settings import as_dict, build
 from kernel.types import Frame
+from tools.eval.cameras import with_camera_model
 from tools.eval.ros2_robot import RemoteSimRobot, ros2_robot
 
 # An evaluator's change to a raw frame before the localiser sees it (occlusion).
@@ -105,8 +106,11 @@ def open_run(cfg: PlacecellConfig, backends: str = "sim", map_path: Path | None 
 def lockstep_config(seed: int, scenario: str = "", world: str = "",
                     start_pose: tuple[float, float, float] | None = None,
                     localisation: LocalisationSettings | None = None,
-                    kinematics: str = "holonomic") -> PlacecellConfig:
-    base = load(None)
+                    kinematics: str = "holonomic", camera_model: str = "mirror"
+                    ) -> PlacecellConfig:
+    """The default configuration for a lock-step run: the simulated robot (not in real
+    time, seeded) in ``world`` or ``scenario``, with its kinematics and camera model."""
+    base = with_camera_model(load(None), camera_model)
     sim = dataclasses.replace(base.sim, realtime=False, seed=seed, scenario=scenario)
     if world:
         sim = dataclasses.replace(sim, world=world)
@@ -137,10 +141,10 @@ class Run:
         self.camera, self.base = camera, create_base(cfg.base, self.ctx)
         self._tmp = tempfile.TemporaryDirectory()
         self.store = MapStore.open(map_path or Path(self._tmp.name) / "map.db",
-                                   geometry_checksum(cfg.mirror, cfg.panorama))
+                                   geometry_checksum(cfg.projection, cfg.panorama))
         self.mapper = Mapper(self.store, cfg.odometry)
         self.session = MappingSession(self.mapper, cfg.mapping.acquisition, cfg.localisation)
-        self.localiser = Localiser(cfg.mirror, cfg.panorama, settings=cfg.localisation,
+        self.localiser = Localiser(cfg.projection, cfg.panorama, settings=cfg.localisation,
                                    odometry_noise=cfg.odometry, known_map=self.session.holder)
         self.events: list[Event] = []  # what the map's owner said, as the daemon publishes
         self.updates = MapUpdates()  # what the last frame found that changes the map

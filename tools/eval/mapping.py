@@ -126,7 +126,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                     {"key": key, "references": refs, "stats": stats}))
         else:
             refs, stats = kept
-            with MapStore.open(map_path, geometry_checksum(cfg.mirror, cfg.panorama),
+            with MapStore.open(map_path, geometry_checksum(cfg.projection, cfg.panorama),
                                readonly=True) as store:
                 places = store.load().places
         coverage, frames = _second_pass(cfg, scenario, places, refs, args, trace)
@@ -179,10 +179,10 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
     t_wall = time.perf_counter()
     camera, base, robot = _devices(cfg, scenario)
     acq = dataclasses.replace(cfg.mapping.acquisition, enabled=True)
-    store = MapStore.open(map_path, geometry_checksum(cfg.mirror, cfg.panorama))
+    store = MapStore.open(map_path, geometry_checksum(cfg.projection, cfg.panorama))
     mapper = Mapper(store, cfg.odometry)
     session = MappingSession(mapper, acq, cfg.localisation)
-    localiser = Localiser(cfg.mirror, cfg.panorama, acquisition=acq,
+    localiser = Localiser(cfg.projection, cfg.panorama, acquisition=acq,
                           known_map=session.holder)
 
     def odometry(samples: list[Any]) -> None:
@@ -290,7 +290,7 @@ def _second_pass(cfg: PlacecellConfig, scenario: Scenario, places: list[Place],
         return 0.0, 0
     robot = build_sim_robot(cfg, scenario)
     # The finished map, with the backgrounds the first pass measured.
-    localiser = Localiser(cfg.mirror, cfg.panorama, settings=cfg.localisation,
+    localiser = Localiser(cfg.projection, cfg.panorama, settings=cfg.localisation,
                           known_map=MapHolder(KnownMap.of(places)))
     rng = np.random.default_rng(args.seed)
     covered = total = 0

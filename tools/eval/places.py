@@ -43,7 +43,7 @@ def learn(world: str, pose: tuple[float, float, float], seed: int,
     base.open()
     robot = shared_sim_robot(ctx)
     reference = robot.true_pose()
-    unwarper = Unwarper(cfg.mirror, cfg.panorama)
+    unwarper = Unwarper(cfg.projection, cfg.panorama)
     tbl = run_tbl(camera, base, unwarper, cfg.tbl, choose=choose)
     assert robot.renderer is not None
     # Static-only: the 16 best by valley measure of the very candidates TBL started from

@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     kind = args.world_kind or "open-room"
     worlds = [f"generate:{kind}:{args.world_seed + k}" for k in range(args.places)]
     places = [learn(w, load_world(w).start_pose, args.seed) for w in worlds]
-    unwarper = Unwarper(config.mirror, config.panorama)
+    unwarper = Unwarper(config.projection, config.panorama)
     matcher = FastMatcher()
     rng = np.random.default_rng(args.seed)
     areas: dict[str, list[float]] = {"tbl": [], "static": []}

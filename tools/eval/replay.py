@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     cfg = load(args.config)
     if not Path(args.map).is_file():
         raise PlacecellError(f"map file {args.map} does not exist")
-    with MapStore.open(args.map, geometry_checksum(cfg.mirror, cfg.panorama),
+    with MapStore.open(args.map, geometry_checksum(cfg.projection, cfg.panorama),
                        readonly=True) as store:
         graph = store.load()
     localiser = make_localiser(cfg, holder_of(graph), graph)

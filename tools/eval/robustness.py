@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     places = [learn(world, (float(x), 10.0, 0.0), args.seed) for x in xs]
     # The daemon's recognition of the places.
     known = KnownMap.of(Place(p.tbl, None, id=k + 1) for k, p in enumerate(places))
-    localiser = Localiser(config.mirror, config.panorama, settings=config.localisation,
+    localiser = Localiser(config.projection, config.panorama, settings=config.localisation,
                           known_map=MapHolder(known))
     ids = list(range(1, len(places) + 1))
     rng = np.random.default_rng(args.seed)

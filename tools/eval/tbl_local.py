@@ -38,6 +38,7 @@ from tools.eval.lockstep import (
 )
 
 DRAWS_PLOTS = True  # path (estimate, truth, odometry, particles), error per frame
+CAMERA_MODELS = True  # --camera-model M: any of kernel/camera_models.py MODEL_NAMES
 SNAPSHOT_FRAMES = (1, 30, 120)
 
 
@@ -84,7 +85,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     base = load(None)
     settings = localisation_settings(base.localisation, args)
     cfg = lockstep_config(args.seed, world=world, start_pose=load_world(world).start_pose,
-                          localisation=settings, kinematics=args.kinematics)
+                          localisation=settings, kinematics=args.kinematics,
+                          camera_model=args.camera_model)
     rng = np.random.default_rng(args.seed + 1000)
     m, cam = cfg.mirror, cfg.camera.sim
     frame_filter = occluder(cam.image_width, cam.image_height, m.center_x_px, m.center_y_px,

@@ -136,12 +136,15 @@ def mapped_run(args: argparse.Namespace) -> Iterator[tuple[Run, list[Point]]]:
         world_spec += f":{args.floor}"
     world = load_world(world_spec)
     settings = localisation_settings(base.localisation, args)
+    camera_model = getattr(args, "camera_model", "mirror")
     cfg = lockstep_config(args.seed, world=world_spec, start_pose=world.start_pose,
-                          localisation=settings)
+                          localisation=settings, camera_model=camera_model)
     backends = getattr(args, "backends", "sim")
     key = f"{world_spec} places={args.places} spacing={args.spacing} speed={args.speed} v2"
     if backends != "sim":  # a map learned through the ros2 backends is another map
         key += f" backends={backends}"
+    if camera_model != "mirror":
+        key += f" camera={camera_model}"
     known = load_references(args.map, key) if args.map else None
     if args.map and known is None:
         args.map.unlink(missing_ok=True)

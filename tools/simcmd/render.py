@@ -71,10 +71,10 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     cam = config.camera.sim
-    renderer = Renderer(world, config.mirror, config.panorama, (cam.image_width,
+    renderer = Renderer(world, config.projection, config.panorama, (cam.image_width,
                                                                 cam.image_height))
     donut = renderer.donut(pose, noise_sigma=args.noise, rng=np.random.default_rng(0))
-    panorama = Unwarper(config.mirror, config.panorama).unwarp(donut)
+    panorama = Unwarper(config.projection, config.panorama).unwarp(donut)
     floor = renderer.floor_mask(pose).astype(np.uint8) * 255
     for name, image in (("plan.png", plan_view(world, pose)), ("donut.png", donut),
                         ("panorama.png", panorama), ("floor.png", floor)):
