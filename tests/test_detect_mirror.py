@@ -73,6 +73,19 @@ def _ring(img: np.ndarray, cx: float, cy: float, r_out: float, gap: float, width
     return np.clip(noisy, 0, 255).astype(np.uint8)
 
 
+def _highlight(img: np.ndarray, cx: float, cy: float, r_in: float, seed: int) -> np.ndarray:
+    """A bright spot inside the camera's dark reflection (the lens's own reflection, a
+    lamp seen in it): 15-35 % of the disc's radius, anywhere within 60 % of it."""
+    rng = np.random.default_rng(seed)
+    radius = rng.uniform(0.15, 0.35) * r_in
+    off, angle = rng.uniform(0.0, 0.6 * r_in - radius), rng.uniform(0.0, 2 * math.pi)
+    spot = np.zeros(img.shape[:2], np.float32)
+    cv2.circle(spot, (round(cx + off * math.cos(angle)), round(cy + off * math.sin(angle))),
+               round(radius), 1.0, -1, lineType=cv2.LINE_AA)
+    spot = cv2.GaussianBlur(spot, (0, 0), 1.5)[..., None]
+    return (img * (1.0 - spot) + rng.uniform(180.0, 250.0) * spot).astype(np.uint8)
+
+
 def _shift(img: np.ndarray, dx: int, dy: int) -> np.ndarray:
     """The camera looking off-centre: the donut moved, the frame cutting it."""
     return cv2.warpAffine(img, np.float32([[1, 0, dx], [0, 1, dy]]),
@@ -116,6 +129,16 @@ def test_a_lit_ring_round_the_mirror_is_not_its_rim(spec: str, cx: float, cy: fl
         g = detect_mirror(_ring(base, cx, cy, r_out, gap, width, noise, seed))
         _assert_found(g, cx, cy, r_in, r_out)
         assert g.ring_outside
+
+
+@pytest.mark.parametrize(("spec", "cx", "cy", "r_in", "r_out", "noise"), CASES)
+def test_the_inner_circle_is_the_dark_disc_not_a_highlight_inside_it(
+        spec: str, cx: float, cy: float, r_in: float, r_out: float, noise: float) -> None:
+    """The inner radius is the edge of the camera's own dark reflection, never a bright
+    spot inside it (before this was handled it reported the spot's edge, 30-50 px in)."""
+    img = _render(spec, cx, cy, r_in, r_out, noise)
+    for seed in range(3):
+        _assert_found(detect_mirror(_highlight(img, cx, cy, r_in, seed)), cx, cy, r_in, r_out)
 
 
 @pytest.mark.parametrize(("dx", "dy"), [(480, 0), (0, 400), (-460, 300)])

@@ -38,6 +38,9 @@ INLIER_PX = 1.5  # a point within this of the circle supports it
 MIN_RIM_ARC_DEG = 120.0  # rim points on less of the circle: refused
 MAX_RMS_PX = 2.0
 MIN_INNER_FRACTION = 0.5
+DISC_CORE = 0.15  # the camera's reflection's level is measured within this share of the rim
+LONG_RUN = 0.25  # ...and its edge is where a departure from it this long (of the rim) starts
+GAP_PX = 3.0  # returns to the level shorter than this do not end a departure
 BORDER_PX = 2.0  # rim points this near the image border are the border, not the rim
 RAY_ANGLES = np.radians(np.arange(RAYS) * 360.0 / RAYS)  # of the polar resampling's rows
 
@@ -171,14 +174,36 @@ def _edges(grey: np.ndarray, cx: float, cy: float, r_rough: float
     steep = band <= 0.5 * band.min(axis=1, keepdims=True)
     outermost = band.shape[1] - 1 - np.argmax(steep[:, ::-1], axis=1)
     outer = (lo + outermost) * scale
-    # Inner edge: the first departure, walking out from the centre, from the uniform level
-    # of the camera's own reflection (texture further out cannot be mistaken for it).
-    core = smooth[:, : max(2, int(0.03 * r_rough / scale))]
-    level = float(np.median(core))
-    spread = float(np.std(core))
+    # Inner edge: walking out from the centre, the start of the first long departure from
+    # the uniform dark level of the camera's own reflection (texture further out cannot
+    # be mistaken for it). Long: LONG_RUN of the rim's radius, gaps at the level shorter
+    # than GAP_PX bridged (dark things seen in the mirror): a highlight inside the dark
+    # disc (the lens's own reflection, a lamp seen in it) returns to the level within
+    # it and is walked through. The level is the disc's, not the highlight's: the
+    # commonest grey level near the centre, of the image's pixels (the polar image would
+    # over-count the centre).
+    h, w = grey.shape[:2]
+    yy, xx = np.ogrid[:h, :w]
+    core = grey[(xx - cx) ** 2 + (yy - cy) ** 2 <= (DISC_CORE * r_rough) ** 2].astype(float)
+    if core.size == 0:
+        core = smooth[:, :2].ravel()
+    counts, bins = np.histogram(core, bins=32, range=(0.0, 256.0))
+    peak = int(np.argmax(counts))
+    level = float(np.median(core[(core >= bins[peak] - 8.0) & (core < bins[peak + 1] + 8.0)]))
+    near = core[np.abs(core - level) < 30.0]
+    spread = float(np.std(near)) if near.size else 0.0
     departed = np.abs(smooth - level) > max(12.0, 4.0 * spread)
     departed[:, hi:] = True
-    inner = np.argmax(departed, axis=1) * scale
+    gap = max(1, int(round(GAP_PX / scale)))
+    bridged = cv2.morphologyEx(departed.astype(np.uint8), cv2.MORPH_CLOSE,
+                               np.ones((1, 2 * gap + 1), np.uint8)) > 0
+    bridged |= departed
+    run = np.zeros(bridged.shape, np.int32)  # departed samples from here outwards
+    run[:, -1] = bridged[:, -1]
+    for k in range(bridged.shape[1] - 2, -1, -1):
+        run[:, k] = np.where(bridged[:, k], run[:, k + 1] + 1, 0)
+    long_enough = run >= max(2, int(LONG_RUN * r_rough / scale))
+    inner = np.argmax(long_enough, axis=1) * scale
     return outer, inner
 
 
