@@ -20,6 +20,8 @@ from hal.registry import BASE_BACKENDS, CAMERA_BACKENDS
 from hal.sim.settings import SimSettings
 from kernel.camera_models import Projection, read_ocamcalib
 from kernel.errors import ConfigError
+from kernel.mount import Mount
+from kernel.se2 import SE2
 from kernel.sensor_settings import MirrorSettings, PanoramaSettings
 from kernel.settings import ROS2_TOPIC, as_dict, build, read_toml, setting
 
@@ -182,6 +184,12 @@ class PlacecellConfig:
             "mirror": self.mirror, "ocamcalib": c.ocamcalib, "fisheye": c.fisheye,
             "equirectangular": c.equirectangular, "dual-fisheye": c.dual_fisheye}
         return models[c.model]
+
+    @property
+    def mount(self) -> Mount:
+        """Where the camera sits on the robot ([camera] mount_*, kernel/mount.py)."""
+        c = self.camera
+        return Mount(SE2(c.mount_x_m, c.mount_y_m, c.mount_yaw_rad))
 
     def __post_init__(self) -> None:
         if self.camera.backend not in CAMERA_BACKENDS:

@@ -4,12 +4,17 @@ service's MappingSession)."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Literal
+
+import numpy as np
 
 from daemon.mapping.acquisition import AcquisitionDecision
 from daemon.mapping.transition import Transition
 from daemon.vision.floor import FloorModel
+from kernel.mount import Mount
+from kernel.se2 import SE2
 from kernel.types import Odometry
 
 BeliefState = Literal["uninitialised", "tracking", "lost", "relocalising"]
@@ -77,6 +82,21 @@ class Belief:
     event: LocalisationEvent | None = None  # a loss or a relocalisation in this frame
     disambiguation: Disambiguation | None = None  # look-alikes told apart in this frame
     odometry: Odometry | None = None  # the base's odometry at the frame's stamp
+
+    def of_robot(self, mount: Mount) -> Belief:
+        """This belief about the camera (the method's, kernel/mount.py) as one about the
+        robot: its pose and covariance in the place's frame and its odometry, as the
+        service gives them out."""
+        if mount.centred:
+            return self
+        pose, cov = self.pose_in_place, self.covariance
+        if pose is not None:
+            robot, covariance = mount.robot_estimate(
+                SE2.of(pose), np.zeros((3, 3)) if cov is None else np.reshape(cov, (3, 3)))
+            pose = robot.as_tuple()
+            cov = None if cov is None else tuple(float(v) for v in covariance.ravel())
+        odometry = None if self.odometry is None else mount.robot_odometry(self.odometry)
+        return dataclasses.replace(self, pose_in_place=pose, covariance=cov, odometry=odometry)
 
 
 @dataclass(frozen=True)

@@ -42,6 +42,7 @@ from daemon.vision.selection import select_static
 from daemon.vision.tracking import column_to_bearing_of_centre, predict_column, track
 from kernel.errors import LearningError
 from kernel.panorama import to_grey
+from kernel.se2 import SE2
 from kernel.types import Odometry
 
 
@@ -103,10 +104,12 @@ CandidateChooser = Callable[[np.ndarray, np.ndarray, int], LandmarkSet]
 class TurnBackAndLook:
     def __init__(self, settings: TblSettings, reference_1: np.ndarray, reference_2: np.ndarray,
                  margin: int, start: Odometry, choose: CandidateChooser | None = None,
-                 kinematics: str = "holonomic") -> None:
+                 kinematics: str = "holonomic", mount: SE2 | None = None) -> None:
         """``choose``: the candidates to track; static selection (§4.2) unless given (the
         thesis identified its artificial markers by hand to measure depth, §4.6.4);
-        ``kinematics``: the base's (cross_legs)."""
+        ``kinematics``: the base's (cross_legs); ``mount``: T_robot_camera (kernel/mount.py):
+        the odometry handed in is the camera's, the legs are commanded to the robot."""
+        self.mount = mount or SE2()
         self.settings = settings
         self.margin = margin
         self.reference_panorama = reference_1  # the place's reference view (design §6)
@@ -210,13 +213,14 @@ class TurnBackAndLook:
         place learned from a path the robot did not drive (issue 32)."""
         leg = self.legs[self.leg]
         a = self._leg_start
-        c, s = math.cos(a.yaw), math.sin(a.yaw)
-        gx, gy = odometry.x - a.x, odometry.y - a.y
-        u, v = c * gx + s * gy, -s * gx + c * gy
-        turned = math.remainder(odometry.yaw - a.yaw, 2 * math.pi)
+        # The camera's motion, seen from the robot at the leg's start (M Δ M⁻¹).
+        driven = self.mount.compose(SE2(a.x, a.y, a.yaw).between(
+            SE2(odometry.x, odometry.y, odometry.yaw))).compose(self.mount.inverse())
+        u, v, turned = driven.as_tuple()
         tolerance = min(self.settings.path_tolerance_m, self.settings.extent_m / 2)
         if math.hypot(u - leg.dx, v - leg.dy) > tolerance or \
-                abs(turned - leg.dyaw) > self.settings.turn_tolerance_rad:
+                abs(math.remainder(turned - leg.dyaw, 2 * math.pi)) > \
+                self.settings.turn_tolerance_rad:
             raise LearningError(
                 f"leg {leg.name}: the base called the move done, but its odometry shows "
                 f"({u:+.3f}, {v:+.3f}) m and {math.degrees(turned):+.1f} deg driven of "

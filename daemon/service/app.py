@@ -128,8 +128,10 @@ class Daemon:
         self.camera = camera_component(
             lambda: create_camera(cfg.camera, self.hal), cfg.camera.read_timeout_s, mailbox,
             lambda: sup.health["camera"], frame_taps)
+        # The method sees the camera's odometry (kernel/mount.py); the recorder the base's.
         self.base = base_component(
-            lambda: create_base(cfg.base, self.hal), cfg.base.read_timeout_s, inbox.put,
+            lambda: create_base(cfg.base, self.hal), cfg.base.read_timeout_s,
+            lambda samples: inbox.put(cfg.mount.camera_odometry(samples)),
             lambda: sup.health["base"], odo_taps, on_open=self.mapper.odometry_restarted)
         # Built whatever the mode: cmd/mode may switch to mapping; nothing is learned or
         # stored while the mode is localisation (_maybe_acquire).
@@ -328,7 +330,7 @@ class Daemon:
                            profile=self._place_profile,
                            odometry_timeout_s=self.config.base.read_timeout_s,
                            link_up=lambda: self.supervisor.health["base"].state == "running",
-                           started_by=started_by)
+                           started_by=started_by, mount=self.config.mount)
             self._job = job
             job.start()
         localiser = self.processing.localiser
@@ -392,7 +394,7 @@ class Daemon:
     def _job_odometry(self, samples: list[Any], base: Any) -> None:
         job = self._job
         if job is not None:
-            job.feed.put_odometry(samples)
+            job.feed.put_odometry(self.config.mount.camera_odometry(samples))
 
     def _job_frame(self, frame: Any) -> None:
         job = self._job
@@ -424,8 +426,9 @@ class Daemon:
         if request.place is None or not self.mapper.has_place(request.place):
             raise api.RequestError(api.ErrorCode.NOT_FOUND, f"place {request.place} is not in "
                                    f"the map ({self.mapper.place_count()} places)")
-        localiser.set_pose(request.place, (request.x, request.y, request.yaw),
-                           request.sigma_xy, request.sigma_yaw)
+        camera = self.config.mount.camera_pose(SE2(request.x, request.y, request.yaw))
+        localiser.set_pose(request.place, camera.as_tuple(), request.sigma_xy,
+                           request.sigma_yaw)
         log.info("pose set: place %d (%.3f, %.3f, %.3f)", request.place, request.x, request.y,
                  request.yaw)
         query.reply(query.key_expr, api.result(place=request.place, x=request.x, y=request.y,
@@ -456,7 +459,8 @@ class Daemon:
             log.warning("%s ignored: the map frame is tied to the site's map only while "
                         "tracking (state %s)", source, None if belief is None else belief.state)
             return
-        here = frame[belief.place_id].compose(SE2.of(belief.pose_in_place))
+        here = self.config.mount.robot_pose(frame[belief.place_id].compose(
+            SE2.of(belief.pose_in_place)))
         tie = pose.compose(here.inverse())  # T_site_map
         try:
             self.session.tie_site(self.config.ros2.frame_id, tie)
@@ -492,12 +496,14 @@ class Daemon:
                         "the localiser is not running" if localiser is None
                         else "no place is in the map frame yet")
             return
+        pose = self.config.mount.camera_pose(pose)  # the method tracks the camera
         place = min(frame, key=lambda p: math.hypot(frame[p].x - pose.x, frame[p].y - pose.y))
         in_place = frame[place].inverse().compose(pose)
         sigma_xy = math.sqrt(max(covariance[0, 0], covariance[1, 1], 0.0)) or None
         sigma_yaw = math.sqrt(max(covariance[2, 2], 0.0)) or None
         self._operator_acted()
         localiser.set_pose(place, in_place.as_tuple(), sigma_xy, sigma_yaw)
+        in_place = self.config.mount.robot_pose(in_place)  # told as the robot's
         log.info("pose set from %s: place %d at %s", source, place,
                  in_place)
         self.publish_event("pose_set", source=source, place=place,
@@ -582,7 +588,8 @@ class Daemon:
         place_in_map = None if tracker is None else self.mapper.map_frame.get(tracker.place.id)
         try:
             self._scene.show(belief.stamp_ns, body, in_map, place_in_map,
-                             None if tracker is None else tracker.filter.particles,
+                             None if tracker is None
+                             else self.config.mount.robot_poses(tracker.filter.particles),
                              None if localiser is None else localiser.panorama,
                              self.mapper.drawn)
         except Exception as e:  # noqa: BLE001 - a viewer never stops localisation
@@ -602,7 +609,8 @@ class Daemon:
                 in_map, place, np.array(belief.covariance).reshape(3, 3), epoch_ns,
                 None if odo is None else SE2(odo.x, odo.y, odo.yaw))
             if tracker is not None and tracker.place.id == belief.place_id:
-                self._ros2.publish_particles(tracker.filter.particles, place, epoch_ns)
+                self._ros2.publish_particles(
+                    self.config.mount.robot_poses(tracker.filter.particles), place, epoch_ns)
         except Exception as e:  # noqa: BLE001 - zenoh shutting down
             log.debug("publish ROS 2 pose failed: %s", e)
 
@@ -628,19 +636,20 @@ class Daemon:
                 and belief.pose_in_place is not None and belief.covariance is not None:
             self._tracked = SavedPose(belief.place_id, belief.pose_in_place,
                                       np.array(belief.covariance).reshape(3, 3), time.time())
-        body = wire.belief_body(belief)
+        robot = belief.of_robot(self.config.mount)  # what is given out is the robot's
+        body = wire.belief_body(robot)
         in_map = place = None
-        if belief.place_id is not None and belief.pose_in_place is not None:
-            place = self.mapper.map_frame.get(belief.place_id)
+        if robot.place_id is not None and robot.pose_in_place is not None:
+            place = self.mapper.map_frame.get(robot.place_id)
             if place is not None:
-                in_map = place.compose(SE2.of(belief.pose_in_place))
+                in_map = place.compose(SE2.of(robot.pose_in_place))
         segments = self.mapper.segment_of
         self.publish("pose", zenoh_link.encode("placecell.pose", wire.pose_body(
-            belief, in_map, None if belief.place_id is None else segments.get(belief.place_id),
+            robot, in_map, None if robot.place_id is None else segments.get(robot.place_id),
             min(segments.values(), default=None))))
         if self._ros2 is not None and place is not None and in_map is not None \
-                and belief.state == "tracking" and belief.covariance is not None:
-            self._publish_ros2(belief, place, in_map)
+                and robot.state == "tracking" and robot.covariance is not None:
+            self._publish_ros2(robot, place, in_map)
         self.publish("belief", zenoh_link.encode("placecell.belief", body))
         try:  # what the frame does to the map, through its one owner (design §6)
             self._publish_events(self.session.observe(belief, updates))

@@ -41,6 +41,7 @@ from kernel.errors import (
     LearningError,
     LearningRefusedError,
 )
+from kernel.mount import Mount
 from kernel.types import Frame, Odometry
 
 log = logging.getLogger(__name__)
@@ -162,15 +163,17 @@ class LearnJob:
                  profile: Callable[[np.ndarray | None], np.ndarray | None] = lambda _: None,
                  odometry_timeout_s: float = BaseSettings().read_timeout_s,
                  link_up: Callable[[], bool] = lambda: True,
-                 started_by: str = "operator") -> None:
+                 started_by: str = "operator", mount: Mount | None = None) -> None:
         """``seen``: the localiser's reliable estimate of the robot now, if any (it joins
         the new place to the map, design §6); ``session``: the map's owner, which stores
         the place (daemon/service/mapping_session.py); ``profile``: the local space
         profile of a reference panorama (design §4), None while the localiser cannot tell;
         ``odometry_timeout_s`` and ``link_up``: see :class:`FeedSensors`; ``started_by``:
         ``operator`` or ``autopilot`` (autonomous acquisition, which an operator's learn
-        pre-empts)."""
+        pre-empts); ``mount``: where the camera sits (the feed's odometry is the camera's,
+        the moves the robot's)."""
         self.label = label
+        self.mount = mount or Mount()
         self.started_by = started_by
         self._odometry_timeout_s = odometry_timeout_s
         self._link_up = link_up
@@ -222,7 +225,8 @@ class LearnJob:
                                   self._link_up)
             tbl = drive_tbl(sensors, self.mover, self.unwarper,
                             self.settings, progress=self._on_progress,
-                            abort=self.abort_requested, on_start=self._begin)
+                            abort=self.abort_requested, on_start=self._begin,
+                            mount=self.mount)
             if self.abort_requested.is_set():
                 raise LearningAbortedError("learning aborted on request")
             driven = time.perf_counter()  # what the robot waits for after the drive

@@ -29,6 +29,7 @@ from kernel.errors import (
     LearningError,
     LearningRefusedError,
 )
+from kernel.mount import Mount
 from kernel.types import Frame, Odometry
 
 log = logging.getLogger(__name__)
@@ -108,18 +109,20 @@ class DeviceSensors:
 
     def __init__(self, camera: Any, base: Any, settings: TblSettings,
                  odometry_timeout_s: float,
-                 on_odometry: Callable[[list[Odometry]], None] | None = None) -> None:
+                 on_odometry: Callable[[list[Odometry]], None] | None = None,
+                 mount: Mount | None = None) -> None:
         self.camera, self.base, self.settings = camera, base, settings
         self.odometry_timeout_s = odometry_timeout_s
         self.odometry = OdometryBuffer()
         self.rate_hz = float(getattr(camera.info, "rate_hz", 0.0) or 10.0)
         self._on_odometry = on_odometry  # every sample read is also handed here
+        self._mount = mount or Mount()  # the method sees the camera's odometry
 
     def frame(self) -> tuple[Frame, Odometry]:
         return frame_with_odometry(self.camera.read, self.odometry, self._read, self.settings)
 
     def _read(self) -> list[Odometry]:
-        samples: list[Odometry] = self.base.read(self.odometry_timeout_s)
+        samples = self._mount.camera_odometry(self.base.read(self.odometry_timeout_s))
         if self._on_odometry is not None:
             self._on_odometry(samples)
         return samples
@@ -129,21 +132,25 @@ def run_tbl(camera: Any, base: Any, unwarper: Unwarper, settings: TblSettings, *
             progress: ProgressCallback | None = None,
             abort: threading.Event | None = None,
             choose: CandidateChooser | None = None,
-            odometry_timeout_s: float = BaseSettings().read_timeout_s) -> TurnBackAndLook:
+            odometry_timeout_s: float = BaseSettings().read_timeout_s,
+            mount: Mount | None = None) -> TurnBackAndLook:
     """:func:`drive_tbl` reading the camera and base devices directly."""
-    return drive_tbl(DeviceSensors(camera, base, settings, odometry_timeout_s), base,
-                     unwarper, settings, progress=progress, abort=abort, choose=choose)
+    return drive_tbl(DeviceSensors(camera, base, settings, odometry_timeout_s, mount=mount),
+                     base, unwarper, settings, progress=progress, abort=abort, choose=choose,
+                     mount=mount)
 
 
 def drive_tbl(sensors: Sensors, mover: Mover, unwarper: Unwarper, settings: TblSettings, *,
               progress: ProgressCallback | None = None,
               abort: threading.Event | None = None,
               choose: CandidateChooser | None = None,
-              on_start: Callable[[Odometry], None] | None = None) -> TurnBackAndLook:
+              on_start: Callable[[Odometry], None] | None = None,
+              mount: Mount | None = None) -> TurnBackAndLook:
     """Drive the whole cross; returns the finished state machine (its result, its
     reference panorama and odometry, and for evaluation every scored candidate).
     ``choose``: see TurnBackAndLook. ``on_start`` is told the odometry at the reference
-    pose before the robot moves.
+    pose before the robot moves. ``mount``: where the camera sits on the robot; the
+    odometry ``sensors`` give is the camera's (kernel/mount.py), the moves are the robot's.
 
     Refuses (LearningError) when the base cannot move or frames stop arriving; on
     ``abort`` the robot is stopped and LearningAbortedError raised (nothing is stored)."""
@@ -155,7 +162,8 @@ def drive_tbl(sensors: Sensors, mover: Mover, unwarper: Unwarper, settings: TblS
     f1, odo = sensors.frame()
     f2, _ = sensors.frame()
     tbl = TurnBackAndLook(settings, unwarper.unwarp(f1.image), unwarper.unwarp(f2.image),
-                          margin, odo, choose, kinematics=mover.info.kinematics)
+                          margin, odo, choose, kinematics=mover.info.kinematics,
+                          mount=(mount or Mount()).robot_camera)
     if on_start is not None:
         on_start(odo)
     frames_this_leg = 0

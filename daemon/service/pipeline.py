@@ -12,6 +12,7 @@ from daemon.localisation.localiser import Localiser
 from daemon.mapping.graph import TopologicalMap
 from daemon.mapping.settings import AcquisitionSettings
 from daemon.store.sqlite_store import SavedPose
+from kernel.se2 import SE2
 
 log = logging.getLogger(__name__)
 
@@ -39,8 +40,9 @@ def make_localiser(config: PlacecellConfig, known_map: MapHolder, graph: Topolog
     start = config.localisation
     if start.initial_place:  # AMCL's set_initial_pose: track from there at once
         if start.initial_place in known_map.current:
-            x, y, yaw = start.initial_pose
-            localiser.set_pose(start.initial_place, (x, y, yaw))
+            x, y, yaw = start.initial_pose  # the robot's: the method tracks the camera
+            localiser.set_pose(start.initial_place,
+                               config.mount.camera_pose(SE2(x, y, yaw)).as_tuple())
         else:
             log.error("localisation.initial_place %d is not in the map: not used",
                       start.initial_place)

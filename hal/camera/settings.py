@@ -81,6 +81,14 @@ class CameraSettings:
     # [mirror], or one of the sections below.
     model: CameraModelName = setting(
         "mirror", doc="mirror | ocamcalib | fisheye | equirectangular | dual-fisheye")
+    # Where the camera sits on the robot (kernel/mount.py): its viewpoint's position in the
+    # robot's frame (x forward, y left, from the rotation centre) and its yaw.
+    mount_x_m: float = setting(0.0, ge=-2.0, le=2.0, doc="camera ahead of the rotation "
+                               "centre (m)")
+    mount_y_m: float = setting(0.0, ge=-2.0, le=2.0, doc="camera left of the rotation "
+                               "centre (m)")
+    mount_yaw_rad: float = setting(0.0, ge=-3.141592653589793, le=3.141592653589793,
+                                   doc="camera's forward axis turned from the robot's")
     ocamcalib: OcamcalibSettings = setting(default_factory=OcamcalibSettings)
     fisheye: FisheyeSettings = setting(default_factory=FisheyeSettings)
     equirectangular: EquirectangularSettings = setting(default_factory=EquirectangularSettings)

@@ -9,6 +9,7 @@ from hal.sim.render import Renderer
 from hal.sim.robot import SimRobot
 from hal.sim.scenario import Scenario, load_scenario
 from hal.sim.world import load_world
+from kernel.se2 import SE2
 
 
 def build_sim_robot(config: Any, scenario: Scenario | None = None, *,
@@ -33,12 +34,15 @@ def build_sim_robot(config: Any, scenario: Scenario | None = None, *,
         start = scenario.start_pose
     elif not sim.scenario and tuple(sim.start_pose) == (0.0, 0.0, 0.0):
         start = world.start_pose  # the world's own start when none is configured
+    c = config.camera
+    mount = SE2(c.mount_x_m, c.mount_y_m, c.mount_yaw_rad).compose(
+        SE2(sim.mount_error_x_m, sim.mount_error_y_m, sim.mount_error_yaw_rad))
     renderer = Renderer(world, config.projection, config.panorama,
                         (camera_settings.image_width, camera_settings.image_height)
                         ) if camera else None
     robot = SimRobot(renderer, camera_settings, base, seed=sim.seed, realtime=sim.realtime,
                      start_pose=(float(start[0]), float(start[1]), float(start[2])),
-                     scenario=scenario)
+                     scenario=scenario, camera_mount=mount.as_tuple())
     if sim.truth_out:
         robot.write_truth_to(sim.truth_out)
     return robot

@@ -31,6 +31,7 @@ from hal.sim.render import Renderer
 from hal.sim.scenario import Scenario
 from kernel.angles import wrap_angle
 from kernel.errors import CommandRejectedError, DeviceInitError
+from kernel.se2 import SE2
 
 
 @dataclass
@@ -57,8 +58,12 @@ def _braking_speed(remaining: float, decel: float, dt: float) -> float:
 class SimRobot:
     def __init__(self, renderer: Renderer | None, camera: SimCameraSettings, base: SimBaseSettings,
                  *, seed: int, realtime: bool, start_pose: tuple[float, float, float],
-                 scenario: Scenario | None = None) -> None:
+                 scenario: Scenario | None = None,
+                 camera_mount: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+        """``camera_mount``: where the camera truly sits on the robot (x, y, yaw in the
+        robot's frame): frames are rendered from there."""
         self.renderer = renderer
+        self.camera_mount = SE2(*camera_mount)
         self.camera = camera
         self.base = base
         self.realtime = realtime
@@ -399,6 +404,8 @@ class SimRobot:
             pose, stamp_ns = self._pose, self.now_ns()
             self._frame_seq += 1
             seq = self._frame_seq
+        if self.camera_mount != SE2():
+            pose = SE2(*pose).compose(self.camera_mount).as_tuple()
         # Rendered outside the lock: odometry goes on while the camera renders.
         image = self.renderer.donut(pose, people=people, gain=gain, noise_sigma=noise,
                                     blur_sigma_px=blur, rng=self._camera_rng)

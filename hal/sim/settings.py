@@ -23,6 +23,11 @@ class SimSettings:
     truth_out: str = setting(
         "", doc="append the true pose at every simulation step to this JSON-lines file (for "
         "tests and evaluation: the method never sees it); empty: not written")
+    mount_error_x_m: float = setting(0.0, ge=-1.0, le=1.0, doc="the simulated camera sits "
+                                     "this far ahead of where [camera] mount says")
+    mount_error_y_m: float = setting(0.0, ge=-1.0, le=1.0, doc="...and this far left")
+    mount_error_yaw_rad: float = setting(0.0, ge=-3.141592653589793, le=3.141592653589793,
+                                         doc="...and turned this much")
     start_pose: list[float] = setting(
         [0.0, 0.0, 0.0], doc="x, y, yaw in the world frame; used when no scenario is set"
     )

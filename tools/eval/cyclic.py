@@ -45,6 +45,7 @@ from tools.eval import plots
 from tools.eval.lockstep import (
     add_backends_argument,
     add_localisation_arguments,
+    add_mount_arguments,
     localisation_settings,
     lockstep_config,
     open_run,
@@ -62,6 +63,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--speed", type=float, default=0.3)
     p.add_argument("--start", type=float, nargs=3, metavar=("X", "Y", "YAW"),
                    help="where the loop starts (default: the world's start pose)")
+    p.add_argument("--kinematics", choices=["holonomic", "differential"], default="holonomic",
+                   help="the simulated base: a differential one turns to face each leg")
+    add_mount_arguments(p)
     add_localisation_arguments(p)
     add_backends_argument(p)
 
@@ -96,7 +100,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     settings = localisation_settings(base.localisation, args)
     start = tuple(args.start) if args.start else load_world(world).start_pose
     cfg = lockstep_config(args.seed, world=world, start_pose=start, localisation=settings,
-                          camera_model=args.camera_model)
+                          camera_model=args.camera_model, kinematics=args.kinematics,
+                          camera_ahead_m=args.camera_ahead, mount_known=not args.mount_left_out)
     spacing = args.loop_m / args.places
     stops = [spacing * k for k in range(1, args.places)]
     closed: list[Transition] = []
@@ -120,11 +125,17 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             aim[0], aim[1] = aim[0] + dx, aim[1] + dy
             goal = loop_origin.compose(SE2(aim[0], aim[1], 0.0))
             move = SE2.of(r.robot.true_pose()).between(goal)
-            for belief in r.drive(move.x, move.y, move.yaw, args.speed):
-                if r.updates.closed_transition is not None:  # Run.step stored it
-                    closed.append(r.updates.closed_transition)
-                switches += belief.switched_from is not None
-                yield belief
+            if args.kinematics == "differential":  # turn to face the leg, drive along it
+                turn = math.atan2(move.y, move.x)
+                moves = [(0.0, 0.0, turn), (math.hypot(move.x, move.y), 0.0, 0.0)]
+            else:  # heading kept
+                moves = [move.as_tuple()]
+            for mx, my, myaw in moves:
+                for belief in r.drive(mx, my, myaw, args.speed):
+                    if r.updates.closed_transition is not None:  # Run.step stored it
+                        closed.append(r.updates.closed_transition)
+                    switches += belief.switched_from is not None
+                    yield belief
 
         for dx, dy, stop in legs(args.loop_m, args.width_m, stops):  # the mapping lap
             for _ in frames(dx, dy):
@@ -141,11 +152,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                             or belief.pose_in_place is None:
                         continue
                     errors.append(error)
-                    tracked.append((belief.place_id, SE2.of(belief.pose_in_place),
-                                    SE2.of(r.robot.true_pose())))
-                    ref = r.references[belief.place_id]
-                    paths["estimate"].append(ref.compose(SE2.of(belief.pose_in_place)
-                                                         ).as_tuple()[:2])
+                    robot = r.cfg.mount.robot_pose(SE2.of(belief.pose_in_place))
+                    tracked.append((belief.place_id, robot, SE2.of(r.robot.true_pose())))
+                    paths["estimate"].append(r.references[belief.place_id].compose(
+                        robot).as_tuple()[:2])
                     paths["truth"].append(r.robot.true_pose()[:2])
                     paths["odometry"].append(true_start.compose(odo_start.between(
                         SE2.of(r.robot.odometry_pose()))).as_tuple()[:2])
@@ -184,7 +194,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "config": {"places": args.places, "laps": args.laps, "loop_m": args.loop_m,
                    "width_m": args.width_m, "speed_m_s": args.speed,
                    "sensor_model": settings.sensor_model, "particles": settings.particles,
-                   "drift": dataclasses.asdict(cfg.base.sim), "backends": args.backends},
+                   "drift": dataclasses.asdict(cfg.base.sim), "backends": args.backends,
+                   "kinematics": args.kinematics, "camera_ahead_m": args.camera_ahead,
+                   "mount_left_out": args.mount_left_out},
         "metrics": {
             "mean_error_m": round(float(all_errors.mean()), 4),
             "p95_error_m": round(float(np.percentile(all_errors, 95)), 4),

@@ -52,6 +52,14 @@ from tools.eval.ros2_robot import RemoteSimRobot, ros2_robot
 FrameFilter = Callable[[np.ndarray], np.ndarray]
 
 
+def add_mount_arguments(p: argparse.ArgumentParser) -> None:
+    """Where the simulated camera sits (kernel/mount.py) and whether the method is told."""
+    p.add_argument("--camera-ahead", type=float, default=0.0, metavar="M",
+                   help="the camera this far ahead of the rotation centre")
+    p.add_argument("--mount-left-out", action="store_true",
+                   help="...and the configuration says it is centred")
+
+
 def add_localisation_arguments(p: argparse.ArgumentParser) -> None:
     """The options every localisation experiment takes (see localisation_settings)."""
     p.add_argument("--sensor-model", choices=("assumed", "estimated", "ellipsoid"),
@@ -106,11 +114,18 @@ def open_run(cfg: PlacecellConfig, backends: str = "sim", map_path: Path | None 
 def lockstep_config(seed: int, scenario: str = "", world: str = "",
                     start_pose: tuple[float, float, float] | None = None,
                     localisation: LocalisationSettings | None = None,
-                    kinematics: str = "holonomic", camera_model: str = "mirror"
-                    ) -> PlacecellConfig:
+                    kinematics: str = "holonomic", camera_model: str = "mirror",
+                    camera_ahead_m: float = 0.0, mount_known: bool = True) -> PlacecellConfig:
     """The default configuration for a lock-step run: the simulated robot (not in real
-    time, seeded) in ``world`` or ``scenario``, with its kinematics and camera model."""
+    time, seeded) in ``world`` or ``scenario``, with its kinematics and camera model; its
+    camera ``camera_ahead_m`` ahead of the rotation centre, which the configuration says
+    when ``mount_known`` (else the camera is centred as far as the method knows)."""
     base = with_camera_model(load(None), camera_model)
+    if camera_ahead_m:
+        said = camera_ahead_m if mount_known else 0.0
+        base = dataclasses.replace(
+            base, camera=dataclasses.replace(base.camera, mount_x_m=said),
+            sim=dataclasses.replace(base.sim, mount_error_x_m=camera_ahead_m - said))
     sim = dataclasses.replace(base.sim, realtime=False, seed=seed, scenario=scenario)
     if world:
         sim = dataclasses.replace(sim, world=world)
@@ -149,9 +164,11 @@ class Run:
         self.events: list[Event] = []  # what the map's owner said, as the daemon publishes
         self.updates = MapUpdates()  # what the last frame found that changes the map
         self.sensors = DeviceSensors(self.camera, self.base, cfg.tbl,
-                                     cfg.base.read_timeout_s, on_odometry=self._odometry)
+                                     cfg.base.read_timeout_s, on_odometry=self._odometry,
+                                     mount=cfg.mount)
         self.frame_filter = frame_filter
-        self.references: dict[int, SE2] = {}  # true reference pose of each place (truth)
+        # the true pose of each place's frame: the camera's at its reference (truth)
+        self.references: dict[int, SE2] = {}
         self.process_s: list[float] = []
 
     def __enter__(self) -> Run:
@@ -212,7 +229,7 @@ class Run:
         self.localiser.learning(True)  # as the daemon does while a learn job runs
         try:
             tbl = drive_tbl(self.sensors, self.base, self.localiser.unwarper, self.cfg.tbl,
-                            on_start=start)
+                            on_start=start, mount=self.cfg.mount)
         except LearningError:  # as the daemon's job ends: nothing stored
             self.session.cancel_place()
             self.localiser.learning_not_started()
@@ -225,7 +242,7 @@ class Run:
             links, tbl.views)
         self.events += learned.events
         self.localiser.place_learned(learned.place.id)  # as the daemon does
-        self.references[learned.place.id] = SE2.of(truth[0])
+        self.references[learned.place.id] = self.cfg.mount.camera_pose(SE2.of(truth[0]))
         return learned.place
 
     def restart(self, acquisition: AcquisitionSettings | None = None,
@@ -252,13 +269,16 @@ class Run:
 
     # ------------------------------------------------------------------ truth
     def truth_in(self, place_id: int) -> SE2:
-        """The robot's true pose in place ``place_id``'s frame (evaluator only)."""
-        return self.references[place_id].between(SE2.of(self.robot.true_pose()))
+        """The true pose of the method's camera (the robot's, with the configured mount,
+        kernel/mount.py) in place ``place_id``'s frame (evaluator only)."""
+        return self.references[place_id].between(
+            self.cfg.mount.camera_pose(SE2.of(self.robot.true_pose())))
 
     def error_m(self, belief: Belief) -> float | None:
-        """Distance between the belief's pose and the truth in the same place."""
+        """Distance between the robot's pose the belief gives and the truth."""
         if belief.pose_in_place is None or belief.place_id is None:
             return None
-        truth = self.truth_in(belief.place_id)
-        x, y, _ = belief.pose_in_place
-        return math.hypot(x - truth.x, y - truth.y)
+        mount = self.cfg.mount
+        truth = mount.robot_pose(self.truth_in(belief.place_id))
+        estimate = mount.robot_pose(SE2.of(belief.pose_in_place))
+        return math.hypot(estimate.x - truth.x, estimate.y - truth.y)

@@ -190,7 +190,7 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
         mapper.on_odometry(samples)
 
     sensors = DeviceSensors(camera, base, cfg.tbl, cfg.base.read_timeout_s,
-                            on_odometry=odometry)
+                            on_odometry=odometry, mount=cfg.mount)
     refs: list[tuple[float, float, float]] = []
     learn_s: list[float] = []
     failures, path_m = 0, 0.0
@@ -221,7 +221,8 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
             localiser.learning(True)  # as the daemon does while a learn job runs
             try:
                 tbl = drive_tbl(sensors, base, localiser.unwarper, cfg.tbl,
-                                on_start=functools.partial(_begin, session, links, localiser))
+                                on_start=functools.partial(_begin, session, links, localiser),
+                                mount=cfg.mount)
             except LearningError:
                 session.cancel_place()
                 localiser.learning_not_started()

@@ -44,7 +44,7 @@ def learn(world: str, pose: tuple[float, float, float], seed: int,
     robot = shared_sim_robot(ctx)
     reference = robot.true_pose()
     unwarper = Unwarper(cfg.projection, cfg.panorama)
-    tbl = run_tbl(camera, base, unwarper, cfg.tbl, choose=choose)
+    tbl = run_tbl(camera, base, unwarper, cfg.tbl, choose=choose, mount=cfg.mount)
     assert robot.renderer is not None
     # Static-only: the 16 best by valley measure of the very candidates TBL started from
     # (same reference frames), so the two sets differ by the dynamic phase alone, not by

@@ -33,6 +33,7 @@ from tools.eval import plots
 from tools.eval.lockstep import (
     Run,
     add_localisation_arguments,
+    add_mount_arguments,
     localisation_settings,
     lockstep_config,
 )
@@ -51,6 +52,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--crosses", type=int, default=2, help="times the cross is driven")
     p.add_argument("--kinematics", choices=["holonomic", "differential"], default="holonomic",
                    help="the simulated base: a differential one drives the cross with turns")
+    add_mount_arguments(p)
 
 
 def occluder(width: int, height: int, cx: float, cy: float, degrees: float,
@@ -86,7 +88,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     settings = localisation_settings(base.localisation, args)
     cfg = lockstep_config(args.seed, world=world, start_pose=load_world(world).start_pose,
                           localisation=settings, kinematics=args.kinematics,
-                          camera_model=args.camera_model)
+                          camera_model=args.camera_model, camera_ahead_m=args.camera_ahead,
+                          mount_known=not args.mount_left_out)
     rng = np.random.default_rng(args.seed + 1000)
     m, cam = cfg.mirror, cfg.camera.sim
     frame_filter = occluder(cam.image_width, cam.image_height, m.center_x_px, m.center_y_px,
@@ -129,7 +132,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "world": {"kind": args.world_kind, "seed": args.world_seed},
         "config": {"sensor_model": args.sensor_model, "occlude_deg": args.occlude_deg,
                    "misassociate": args.misassociate, "crosses": args.crosses,
-                   "particles": settings.particles, "kinematics": args.kinematics},
+                   "particles": settings.particles, "kinematics": args.kinematics,
+                   "camera_ahead_m": args.camera_ahead, "mount_left_out": args.mount_left_out},
         "metrics": {
             "mean_error_m": round(float(e.mean()), 4),
             "p95_error_m": round(float(np.percentile(e, 95)), 4),
