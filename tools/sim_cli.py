@@ -18,6 +18,8 @@ SUBCOMMANDS = {
     "world": ("tools.simcmd.world", "generate a world: --kind K --seed N --out W.toml"),
     "render": ("tools.simcmd.render", "render plan view, donut and panorama PNGs"),
     "detect-mirror": ("tools.simcmd.detect_mirror", "find the mirror donut in a raw image"),
+    "calibrate": ("tools.simcmd.calibrate", "a camera model's configuration from its "
+                  "images (--model mirror|fisheye|dual-fisheye|equirectangular|ocamcalib)"),
     "record": ("tools.simcmd.record", "record a scenario to an MCAP file"),
     "ros2-robot": ("tools.simcmd.ros2_robot", "the simulated robot as a ROS 2 robot over "
                    "rmw_zenoh (images, /odom, /cmd_vel)"),
