@@ -13,8 +13,9 @@ each radius was measured and refuses rather than print a wrong circle:
 3. **rim points**: on each of 360 rays the outermost strong fall in brightness up to just
    beyond that extent. Rays whose fall is the image border are dropped (the rim is out of
    the frame there); rays where something dark touches the rim give points further in;
-4. **circles** fitted to the rim points and to the inner edge (the first departure from
-   the uniform level of the camera's own reflection, walking out from the centre) by
+4. **circles** fitted to the rim points and to the inner edge (the end of the first
+   stretch, walking out from the centre, at the uniform dark level of the camera's own
+   reflection: a highlight inside it comes before, dark things in the mirror after) by
    RANSAC, then least squares over the inliers; steps 2-4 once more around the refined
    centre.
 
@@ -39,8 +40,8 @@ MIN_RIM_ARC_DEG = 120.0  # rim points on less of the circle: refused
 MAX_RMS_PX = 2.0
 MIN_INNER_FRACTION = 0.5
 DISC_CORE = 0.15  # the camera's reflection's level is measured within this share of the rim
-LONG_RUN = 0.25  # ...and its edge is where a departure from it this long (of the rim) starts
-GAP_PX = 3.0  # returns to the level shorter than this do not end a departure
+DARK_RUN = 0.05  # ...and the disc is the first stretch at that level this long (of the rim)
+GAP_PX = 3.0  # departures from the level shorter than this do not end the stretch
 BORDER_PX = 2.0  # rim points this near the image border are the border, not the rim
 RAY_ANGLES = np.radians(np.arange(RAYS) * 360.0 / RAYS)  # of the polar resampling's rows
 
@@ -174,14 +175,14 @@ def _edges(grey: np.ndarray, cx: float, cy: float, r_rough: float
     steep = band <= 0.5 * band.min(axis=1, keepdims=True)
     outermost = band.shape[1] - 1 - np.argmax(steep[:, ::-1], axis=1)
     outer = (lo + outermost) * scale
-    # Inner edge: walking out from the centre, the start of the first long departure from
-    # the uniform dark level of the camera's own reflection (texture further out cannot
-    # be mistaken for it). Long: LONG_RUN of the rim's radius, gaps at the level shorter
-    # than GAP_PX bridged (dark things seen in the mirror): a highlight inside the dark
-    # disc (the lens's own reflection, a lamp seen in it) returns to the level within
-    # it and is walked through. The level is the disc's, not the highlight's: the
-    # commonest grey level near the centre, of the image's pixels (the polar image would
-    # over-count the centre).
+    # Inner edge: where the camera's own dark reflection ends. Walking out from the centre,
+    # the first stretch of DARK_RUN of the rim's radius (or more) at its uniform level,
+    # gaps shorter than GAP_PX bridged (noise): its end is the edge. A highlight inside
+    # the dark disc (the lens's own reflection, a lamp seen in it) comes before that
+    # stretch and is walked through; dark things seen in the mirror further out come
+    # after it and cannot be taken for it. The level is the disc's, not the highlight's:
+    # the commonest grey level near the centre, of the image's pixels (the polar image
+    # would over-count the centre).
     h, w = grey.shape[:2]
     yy, xx = np.ogrid[:h, :w]
     core = grey[(xx - cx) ** 2 + (yy - cy) ** 2 <= (DISC_CORE * r_rough) ** 2].astype(float)
@@ -192,18 +193,20 @@ def _edges(grey: np.ndarray, cx: float, cy: float, r_rough: float
     level = float(np.median(core[(core >= bins[peak] - 8.0) & (core < bins[peak + 1] + 8.0)]))
     near = core[np.abs(core - level) < 30.0]
     spread = float(np.std(near)) if near.size else 0.0
-    departed = np.abs(smooth - level) > max(12.0, 4.0 * spread)
-    departed[:, hi:] = True
+    at_level = np.abs(smooth - level) <= max(12.0, 4.0 * spread)
+    at_level[:, hi:] = False
     gap = max(1, int(round(GAP_PX / scale)))
-    bridged = cv2.morphologyEx(departed.astype(np.uint8), cv2.MORPH_CLOSE,
+    bridged = cv2.morphologyEx(at_level.astype(np.uint8), cv2.MORPH_CLOSE,
                                np.ones((1, 2 * gap + 1), np.uint8)) > 0
-    bridged |= departed
-    run = np.zeros(bridged.shape, np.int32)  # departed samples from here outwards
+    bridged |= at_level
+    run = np.zeros(bridged.shape, np.int32)  # samples at the level from here outwards
     run[:, -1] = bridged[:, -1]
     for k in range(bridged.shape[1] - 2, -1, -1):
         run[:, k] = np.where(bridged[:, k], run[:, k + 1] + 1, 0)
-    long_enough = run >= max(2, int(LONG_RUN * r_rough / scale))
-    inner = np.argmax(long_enough, axis=1) * scale
+    disc = run >= max(2, int(DARK_RUN * r_rough / scale))
+    start = np.argmax(disc, axis=1)
+    found = disc[np.arange(len(start)), start]
+    inner = np.where(found, start + run[np.arange(len(start)), start], hi) * scale
     return outer, inner
 
 
