@@ -334,11 +334,17 @@ class Renderer:
         self._map_y = np.asarray(row, np.float32)
 
     BAND_ROWS_MAX = 720
+    BAND_MARGIN_DEG = 5.0
+    ABOVE_ROW, BELOW_ROW = 1, 3  # extra band rows after the band's own (see donut)
 
     def _build_model_map(self) -> None:
         """The same for any camera model (kernel/camera_models.py): the band spans the
-        elevations the camera sees, at half the panorama's row step (at most
-        BAND_ROWS_MAX rows); pixels that see nothing of the world are black."""
+        elevations the camera sees within BAND_MARGIN_DEG of the panorama's, at half the
+        panorama's row step (at most BAND_ROWS_MAX rows). What it sees above and below
+        them (the ceiling, the floor at the robot's feet) is drawn flat in the ceiling's
+        and the floor's colours: the daemon's panorama never looks there, and a 360°
+        camera's whole sphere costs three times the mirror's rendering. Pixels that see
+        nothing of the world are black."""
         w, h = self.image_size
         u, v = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
         bearing, phi = self.model.direction_of_point(u, v)
@@ -347,8 +353,9 @@ class Renderer:
             raise ValueError("the camera model sees nothing of the world in a "
                              f"{w} x {h} image")
         limit = math.radians(89.5)
-        self._band_top = min(float(np.max(phi[seen])), limit)
-        self._band_bottom = max(float(np.min(phi[seen])), -limit)
+        margin = math.radians(self.BAND_MARGIN_DEG)
+        self._band_top = min(float(np.max(phi[seen])), limit, self.model.top + margin)
+        self._band_bottom = max(float(np.min(phi[seen])), -limit, self.model.bottom - margin)
         step = (self.model.top - self.model.bottom) / self.pano.height / 2.0
         self._band_rows = min(self.BAND_ROWS_MAX, int(math.ceil(
             (self._band_top - self._band_bottom) / step)))
@@ -357,6 +364,10 @@ class Renderer:
                      self._band_cols)
         row = (self._band_top - np.clip(phi, self._band_bottom, self._band_top)) * (
             self._band_rows / (self._band_top - self._band_bottom)) - 0.5
+        with np.errstate(invalid="ignore"):
+            row = np.where(phi > self._band_top + 1e-9, self._band_rows + self.ABOVE_ROW, row)
+            row = np.where(phi < self._band_bottom - 1e-9, self._band_rows + self.BELOW_ROW,
+                           row)
         row = np.where(seen, row, self._band_rows + 2.0)
         self._map_x = np.asarray(np.where(seen, col, 0.0), np.float32)
         self._map_y = np.asarray(row, np.float32)
@@ -386,8 +397,14 @@ class Renderer:
         elev, bearings = self._pano_grid(self._band_rows, self._band_cols, self._band_top,
                                          self._band_bottom)
         band, _ = self._render(pose, elev, bearings, people, gain)
-        band = np.concatenate([band, np.zeros((3, band.shape[1], 4), np.uint8)])
-        band[-3, :, :3] = CAMERA_BODY_BGR
+        # Extra rows: the camera body (n), black (n + 2, n + 4: the last row, which
+        # BORDER_WRAP blends into the band's first), and for other camera models what is
+        # seen above and below the band, drawn flat: the ceiling's colour and the floor's.
+        n = band.shape[0]
+        band = np.concatenate([band, np.zeros((5, band.shape[1], 4), np.uint8)])
+        band[n, :, :3] = CAMERA_BODY_BGR
+        band[n + self.ABOVE_ROW, :, :3] = np.array(self.world.ceiling_colour, np.uint8) * gain
+        band[n + self.BELOW_ROW, :, :3] = np.array(self.world.floor_colour, np.uint8) * gain
         raw = cv2.cvtColor(cv2.remap(band, self._map_x, self._map_y,
                                      interpolation=cv2.INTER_LINEAR,
                                      borderMode=cv2.BORDER_WRAP), cv2.COLOR_BGRA2BGR)
