@@ -60,7 +60,8 @@ class PlaceTracker:
     """The particle filter in one place's frame, fed by tracking its landmarks."""
 
     def __init__(self, place: Place, settings: LocalisationSettings, model: SensorModel,
-                 rng: np.random.Generator) -> None:
+                 rng: np.random.Generator,
+                 mount: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
         self.place = place
         self.settings = settings
         self.model = model
@@ -69,7 +70,7 @@ class PlaceTracker:
         self.rows = place.landmarks.rows().astype(float)
         self.width = place.landmarks.width
         self.margin = place.landmarks.margin
-        self.filter = ParticleFilter(settings, rng)
+        self.filter = ParticleFilter(settings, rng, mount)
         self.estimate: Estimate | None = None
         self.confidence = 0.0  # of the last update
         self.support = 0.0

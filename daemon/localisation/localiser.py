@@ -67,6 +67,7 @@ from daemon.vision.signature import signature, similarity
 from daemon.vision.unwarp import Unwarper
 from kernel.camera_models import Projection
 from kernel.errors import PlacecellError
+from kernel.mount import Mount
 from kernel.panorama import core_of, to_grey
 from kernel.se2 import SE2, UncertainSE2
 from kernel.sensor_settings import PanoramaSettings
@@ -130,9 +131,12 @@ class Localiser:
                  acquisition: AcquisitionSettings | None = None,
                  settings: LocalisationSettings | None = None,
                  odometry_noise: OdometryNoiseSettings | None = None,
-                 known_map: MapHolder | None = None) -> None:
+                 known_map: MapHolder | None = None, mount: Mount | None = None) -> None:
         """``known_map``: the map's holder, whose owner (the service's MappingSession)
-        changes it; the localiser only reads it (daemon/localisation/known_map.py)."""
+        changes it; the localiser only reads it (daemon/localisation/known_map.py).
+        ``mount``: where the camera sits on the robot; the odometry handed in is the
+        camera's (kernel/mount.py), the motion model's noise the robot's."""
+        self.mount = (mount or Mount()).robot_camera.as_tuple()
         self.unwarper = Unwarper(projection, panorama)
         self.settings = settings or LocalisationSettings()
         self.odometry_noise = odometry_noise or OdometryNoiseSettings()
@@ -526,7 +530,7 @@ class Localiser:
         """Global relocalisation's pick: particles over ``recovery_sigma_m`` around the
         place's reference, the orientation from the bearings (§9.3.2, eq. 8.34)."""
         tracker = PlaceTracker(self.map.places[place_id].place, self.settings, self.model,
-                               self.rng)
+                               self.rng, self.mount)
         tracker.start_anywhere(grey, self.settings.recovery_sigma_m)
         self.tracker, self._closure = tracker, self._bridge(place_id)
 
@@ -564,7 +568,7 @@ class Localiser:
         if self._pose_request is request:  # not replaced by another thread meanwhile
             self._pose_request = None
         self.tracker = PlaceTracker(self.map.places[request.place_id].place, self.settings,
-                                    self.model, self.rng)
+                                    self.model, self.rng, self.mount)
         self.tracker.start(grey, request.pose, request.sigma_xy, request.sigma_yaw)
         self._closure = None
         self.reloc.told(self._last_stamp_ns or 0, self._frames, request.confirm)
@@ -592,7 +596,7 @@ class Localiser:
             return tuple(scores), None
         here = UncertainSE2(SE2.of(estimate.pose), estimate.covariance)
         target = self.map.places[switch.place_id].place
-        tracker = PlaceTracker(target, self.settings, self.model, self.rng)
+        tracker = PlaceTracker(target, self.settings, self.model, self.rng, self.mount)
         if switch.kind in ("neighbour", "graph"):
             # §8.2, eq. 8.35: the pose in the neighbour's frame, T_to_robot = T_from_to⁻¹ ∘
             # T_from_robot; the particles spread over both uncertainties. A place with no
@@ -713,7 +717,7 @@ class Localiser:
         current, est = self.tracker.place.id, self.tracker.estimate
         confidence = self.tracker.confidence
         tracker = PlaceTracker(self.map.places[place_id].place, self.settings, self.model,
-                               self.rng)
+                               self.rng, self.mount)
         tracker.start_anywhere(grey, REVISIT_SIGMA_M)
         self._closure = None
         if odo is not None and reliable(est.covariance, confidence, self.settings):

@@ -32,8 +32,18 @@ def motion_sigmas(motion: tuple[float, float, float], dt_s: float,
 
 
 def predict(particles: np.ndarray, motion: tuple[float, float, float], dt_s: float,
-            s: LocalisationSettings, rng: np.random.Generator) -> None:
-    """Move ``particles`` (N, 3) in place by ``motion`` in each particle's own frame."""
+            s: LocalisationSettings, rng: np.random.Generator,
+            mount: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+    """Move ``particles`` (N, 3) in place by ``motion`` in each particle's own frame.
+
+    ``mount``: T_robot_camera (kernel/mount.py). The particles and ``motion`` are then
+    the camera's, but the noise arises in the robot's wheels: the camera's increment is
+    taken back to the robot's, Δr = M Δc M⁻¹, made noisy there, and each particle moves
+    by M⁻¹ Δr' M. A turn in place, which carries the camera along an arc, adds no
+    translation noise of its own (the lever arm is rigid)."""
+    if mount != (0.0, 0.0, 0.0):
+        _predict_mounted(particles, motion, dt_s, s, rng, mount)
+        return
     dx, dy, dtheta = motion
     sigma_xy, sigma_yaw = motion_sigmas(motion, dt_s, s)
     n = len(particles)
@@ -45,3 +55,33 @@ def predict(particles: np.ndarray, motion: tuple[float, float, float], dt_s: flo
     particles[:, 1] += sn * ux + c * uy
     particles[:, 2] = np.mod(particles[:, 2] + dtheta + sigma_yaw * noise[:, 2] + math.pi,
                              2.0 * math.pi) - math.pi  # θ' = θ + Δθ + ε, wrapped
+
+
+def _predict_mounted(particles: np.ndarray, motion: tuple[float, float, float], dt_s: float,
+                     s: LocalisationSettings, rng: np.random.Generator,
+                     mount: tuple[float, float, float]) -> None:
+    """:func:`predict` with the camera at ``mount`` on the robot."""
+    mx, my, mt = mount
+    cm, sm = math.cos(mt), math.sin(mt)
+    inv = (-cm * mx - sm * my, sm * mx - cm * my, -mt)  # M⁻¹
+
+    def conjugate(a: tuple[float, float, float], x: np.ndarray, y: np.ndarray, t: np.ndarray,
+                  b: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """a ∘ (x, y, t) ∘ b for arrays of (x, y, t)."""
+        ct, st = np.cos(t), np.sin(t)
+        x1, y1, t1 = x + ct * b[0] - st * b[1], y + st * b[0] + ct * b[1], t + b[2]
+        ca, sa = math.cos(a[2]), math.sin(a[2])
+        return a[0] + ca * x1 - sa * y1, a[1] + sa * x1 + ca * y1, t1 + a[2]
+
+    rx, ry, rt = (float(v[0]) for v in conjugate(mount, np.array([motion[0]]),
+                                                  np.array([motion[1]]),
+                                                  np.array([motion[2]]), inv))
+    sigma_xy, sigma_yaw = motion_sigmas((rx, ry, rt), dt_s, s)
+    n = len(particles)
+    noise = rng.standard_normal((n, 3))
+    ux, uy, ut = conjugate(inv, rx + sigma_xy * noise[:, 0], ry + sigma_xy * noise[:, 1],
+                           rt + sigma_yaw * noise[:, 2], mount)
+    c, sn = np.cos(particles[:, 2]), np.sin(particles[:, 2])
+    particles[:, 0] += c * ux - sn * uy
+    particles[:, 1] += sn * ux + c * uy
+    particles[:, 2] = np.mod(particles[:, 2] + ut + math.pi, 2.0 * math.pi) - math.pi

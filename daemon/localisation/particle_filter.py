@@ -92,9 +92,12 @@ def dominant_mode(particles: np.ndarray, weights: np.ndarray, radius_m: float = 
 class ParticleFilter:
     """The filter's state and its three steps (module docstring)."""
 
-    def __init__(self, settings: LocalisationSettings, rng: np.random.Generator) -> None:
+    def __init__(self, settings: LocalisationSettings, rng: np.random.Generator,
+                 mount: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+        """``mount``: T_robot_camera, the particles being the camera's (motion_model)."""
         self.settings = settings
         self.rng = rng
+        self.mount = mount
         self.particles = np.zeros((settings.particles, 3))
         self.log_weights = np.zeros(settings.particles)
 
@@ -114,7 +117,7 @@ class ParticleFilter:
         self.log_weights = np.zeros(len(idx))
 
     def predict(self, motion: tuple[float, float, float], dt_s: float) -> None:
-        motion_model.predict(self.particles, motion, dt_s, self.settings, self.rng)
+        motion_model.predict(self.particles, motion, dt_s, self.settings, self.rng, self.mount)
 
     def weigh(self, log_likelihood: np.ndarray) -> None:
         self.log_weights = self.log_weights + log_likelihood

@@ -34,7 +34,7 @@ def make_localiser(config: PlacecellConfig, known_map: MapHolder, graph: Topolog
     ``[localisation] initial_place`` / ``initial_pose`` when one is configured."""
     localiser = Localiser(config.projection, config.panorama, acquisition=acquisition,
                           settings=config.localisation, odometry_noise=config.odometry,
-                          known_map=known_map)
+                          known_map=known_map, mount=config.mount)
     if graph.floor is not None:
         localiser.know_floor(graph.floor)
     start = config.localisation

@@ -160,7 +160,8 @@ class Run:
         self.mapper = Mapper(self.store, cfg.odometry)
         self.session = MappingSession(self.mapper, cfg.mapping.acquisition, cfg.localisation)
         self.localiser = Localiser(cfg.projection, cfg.panorama, settings=cfg.localisation,
-                                   odometry_noise=cfg.odometry, known_map=self.session.holder)
+                                   odometry_noise=cfg.odometry, known_map=self.session.holder,
+                                   mount=cfg.mount)
         self.events: list[Event] = []  # what the map's owner said, as the daemon publishes
         self.updates = MapUpdates()  # what the last frame found that changes the map
         self.sensors = DeviceSensors(self.camera, self.base, cfg.tbl,

@@ -183,7 +183,7 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
     mapper = Mapper(store, cfg.odometry)
     session = MappingSession(mapper, acq, cfg.localisation)
     localiser = Localiser(cfg.projection, cfg.panorama, acquisition=acq,
-                          known_map=session.holder)
+                          known_map=session.holder, mount=cfg.mount)
 
     def odometry(samples: list[Any]) -> None:
         localiser.add_odometry(samples)
