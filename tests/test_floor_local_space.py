@@ -10,7 +10,7 @@ import pytest
 
 from daemon.localisation.global_localisation import near_best
 from daemon.vision.floor import ColourModel, FloorGrid, gradient_floor, texture_threshold
-from daemon.vision.local_space import match, match_many, profile, profile_m
+from daemon.vision.local_space import LocalSpace, match, match_many, profile, profile_m
 from tools.eval.cli import main as eval_main
 
 H, W, HORIZON = 120, 720, 43
@@ -97,6 +97,21 @@ def test_a_person_walking_past_does_not_rewrite_the_grid_a_lasting_change_does()
     for _ in range(12):
         grid.update(_scene(rng, moved), model)
     assert np.mean(grid.mask() == _truth(moved)) > 0.99
+
+
+def test_a_floor_the_camera_does_not_see_is_not_learned_and_a_plain_one_is() -> None:
+    """An upward fisheye sees nothing at the panorama's bottom rows (black): no floor is
+    learned from them and the frames go on (a floor learned from black had a zero
+    threshold and stopped the localiser); a floor without texture gets a positive one."""
+    space = LocalSpace((120, 720), 45, np.linspace(5.0, 0.5, 120))
+    unseen = np.full((120, 720, 3), 120, np.uint8)
+    unseen[90:] = 0
+    space.update(unseen)
+    assert space.floor is None
+    plain = np.full((120, 720, 3), 120, np.uint8)
+    space.update(plain)
+    assert space.floor is not None and space.floor.gradient_threshold > 0
+    assert texture_threshold(np.full((12, 40), 90, np.uint8)) > 0
 
 
 def test_profiles_match_turned_views_and_tell_other_spots_apart() -> None:

@@ -99,13 +99,17 @@ def vertical_steps(grey: np.ndarray, rows: int = 3, columns: int = 5) -> np.ndar
     return step
 
 
+MIN_TEXTURE_STEP = 0.02  # log intensity: 2 % in brightness
+
+
 def texture_threshold(floor_grey: np.ndarray, rows: int = 3, columns: int = 5) -> float:
     """A step the floor's own texture does not make: 1.5 x the 99th percentile of the
     steps within a patch known to be floor (e.g. the one the colour model learns from)."""
     step = vertical_steps(floor_grey, rows, columns)[rows:floor_grey.shape[0] - rows + 1]
     if step.size == 0:
         raise ValueError(f"a floor patch needs more than {2 * rows} rows")
-    return 1.5 * float(np.percentile(step, 99))
+    # A floor without texture (or with no noise) still has a step it does not make.
+    return max(1.5 * float(np.percentile(step, 99)), MIN_TEXTURE_STEP)
 
 
 def gradient_boundary(grey: np.ndarray, horizon_row: int, threshold: float, rows: int = 3,

@@ -27,6 +27,7 @@ BINS = 16
 CAP_M = 5.0  # a bin of profile_m at most this: its largest value
 AHEAD_DEG = 20.0  # the floor sample: within this of straight ahead...
 SAMPLE_ROWS = 12  # ...in the panorama's bottom rows
+UNSEEN_SHARE = 0.5  # a floor patch more than half black (outside the camera's view) is not learned
 
 
 def profile(floor_mask: np.ndarray, bins: int = BINS) -> np.ndarray:
@@ -103,8 +104,10 @@ class LocalSpace:
         centre = int(round(float(column_of_bearing(0.0, width))))
         half = int(round(width * AHEAD_DEG / 360.0))
         patch = core_bgr[-SAMPLE_ROWS:, np.arange(centre - half, centre + half + 1) % width]
-        self.know_floor(FloorModel(ColourModel.learn(patch), texture_threshold(
-            cv2.cvtColor(patch, cv2.COLOR_BGR2GRAY))))
+        grey = cv2.cvtColor(patch, cv2.COLOR_BGR2GRAY)
+        if float(np.mean(grey == 0)) > UNSEEN_SHARE:
+            return  # the camera does not see there (an upward fisheye, design §2): no floor
+        self.know_floor(FloorModel(ColourModel.learn(patch), texture_threshold(grey)))
 
     def know_floor(self, floor: FloorModel) -> None:
         """The floor model to use (learned, or stored with the map); the grid starts
@@ -117,8 +120,8 @@ class LocalSpace:
         """One frame into the grid (the floor learned from it first if not yet)."""
         if self.floor is None:
             self.learn_floor(core_bgr)
-        assert self.floor is not None
-        self.grid.update(core_bgr, self.floor.colour, methods)
+        if self.floor is not None:
+            self.grid.update(core_bgr, self.floor.colour, methods)
 
     def profile(self) -> np.ndarray:
         return profile_m(self.grid.mask(), self.distance_of_rows)

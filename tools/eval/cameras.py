@@ -4,7 +4,8 @@ M, so every experiment runs on any camera the daemon supports.
 
 Each model's simulated camera is a plausible one of its kind: ``ocamcalib`` is the
 default mirror as OCamCalib would have calibrated it (:func:`ocamcalib_of_mirror`),
-``fisheye`` an upward equidistant 220° lens, ``equirectangular`` and ``dual-fisheye``
+``fisheye`` an upward equidistant 220° lens with the panorama's band set within its
+view (from -18°, as its user would set it), ``equirectangular`` and ``dual-fisheye``
 a consumer 360° camera's 1280 x 640 frames.
 """
 
@@ -21,6 +22,7 @@ from kernel.sensor_settings import MirrorSettings, OcamcalibSettings, PanoramaSe
 
 __all__ = ["MODEL_NAMES", "ocamcalib_of_mirror", "with_camera_model"]
 
+FISHEYE_BAND_BOTTOM_DEG = -18.0
 # The simulated camera's frame size for each model (width, height).
 SIM_IMAGE_SIZE = {"mirror": (640, 480), "ocamcalib": (640, 480), "fisheye": (640, 480),
                   "equirectangular": (1280, 640), "dual-fisheye": (1280, 640)}
@@ -37,7 +39,11 @@ def with_camera_model(cfg: PlacecellConfig, name: str) -> PlacecellConfig:
                                                                            cfg.panorama))
     width, height = SIM_IMAGE_SIZE[model]
     sim = dataclasses.replace(camera.sim, image_width=width, image_height=height)
-    return dataclasses.replace(cfg, camera=dataclasses.replace(camera, model=model, sim=sim))
+    panorama = cfg.panorama
+    if model == "fisheye":  # the band within what a 220° lens sees (down to -20°)
+        panorama = dataclasses.replace(panorama, elevation_bottom_deg=FISHEYE_BAND_BOTTOM_DEG)
+    return dataclasses.replace(cfg, camera=dataclasses.replace(camera, model=model, sim=sim),
+                               panorama=panorama)
 
 
 def ocamcalib_of_mirror(mirror: MirrorSettings, panorama: PanoramaSettings,
