@@ -16,13 +16,12 @@ camera the robot has. ``[camera] model`` picks one:
 - ``dual-fisheye``: a 360° camera's raw frames, two fisheyes side by side.
 
 Radial models share the azimuth rule of the mirror: image angle α (counter-clockwise,
-image y up) = s β + offset, s = −1 when ``mirrored`` (:class:`Azimuth`).
+image y up) = s β + offset, s = −1 when ``mirrored`` (kernel/mirror.py, ``Azimuth``).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol, get_args
 
@@ -30,7 +29,7 @@ import numpy as np
 
 from kernel.angles import wrap_angle
 from kernel.errors import ConfigError
-from kernel.mirror import MirrorModel
+from kernel.mirror import Azimuth, MirrorModel
 from kernel.panorama import elevation_of_row
 from kernel.sensor_settings import (
     CameraModelName,
@@ -78,22 +77,6 @@ def camera_model(projection: Projection, panorama: PanoramaSettings) -> CameraMo
     if isinstance(projection, EquirectangularSettings):
         return EquirectangularModel(projection, panorama)
     return DualFisheyeModel(projection, panorama)
-
-
-@dataclass(frozen=True)
-class Azimuth:
-    """Image angle α (counter-clockwise, image y up) of a bearing: α = s β + offset."""
-
-    mirrored: bool
-    offset: float
-
-    def image_angle(self, bearing: np.ndarray) -> np.ndarray:
-        sign = -1.0 if self.mirrored else 1.0
-        return sign * np.asarray(bearing, dtype=float) + self.offset
-
-    def bearing(self, alpha: np.ndarray) -> np.ndarray:
-        sign = -1.0 if self.mirrored else 1.0
-        return _half_open(sign * (np.asarray(alpha, dtype=float) - self.offset))
 
 
 class _Band:

@@ -18,9 +18,11 @@ Azimuth: image angle α (counter-clockwise, image y up) = s·β + offset, s = �
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
+from kernel.angles import wrap_angle
 from kernel.panorama import elevation_of_row, row_of_elevation
 from kernel.sensor_settings import MirrorSettings, PanoramaSettings
 
@@ -72,6 +74,24 @@ def hyperboloid_elevation(r: np.ndarray, a: float, b: float, focal_px: float) ->
     return np.where(np.isfinite(k), phi, np.nan)
 
 
+@dataclass(frozen=True)
+class Azimuth:
+    """Image angle α (counter-clockwise, image y up) of a bearing: α = s β + offset, s = −1
+    when ``mirrored``; the rule of every radial camera model (kernel/camera_models.py)."""
+
+    mirrored: bool
+    offset: float
+
+    def image_angle(self, bearing: np.ndarray) -> np.ndarray:
+        sign = -1.0 if self.mirrored else 1.0
+        return sign * np.asarray(bearing, dtype=float) + self.offset
+
+    def bearing(self, alpha: np.ndarray) -> np.ndarray:
+        """The bearing, in (−π, π], of image angle ``alpha``."""
+        sign = -1.0 if self.mirrored else 1.0
+        return np.asarray(wrap_angle(sign * (np.asarray(alpha, dtype=float) - self.offset)))
+
+
 class MirrorModel:
     """Maps panorama (row, bearing) to raw image points for one configuration."""
 
@@ -80,6 +100,7 @@ class MirrorModel:
         self.panorama = panorama
         self.top = math.radians(panorama.elevation_top_deg)
         self.bottom = math.radians(panorama.elevation_bottom_deg)
+        self.azimuth = Azimuth(mirror.mirrored, mirror.bearing_offset_rad)
 
     def radius_of_row(self, row: np.ndarray) -> np.ndarray:
         """Image radius (px) of (fractional) panorama rows."""
@@ -127,12 +148,7 @@ class MirrorModel:
                                            self.bottom))
 
     def image_angle(self, bearing: np.ndarray) -> np.ndarray:
-        sign = -1.0 if self.mirror.mirrored else 1.0
-        return sign * np.asarray(bearing, dtype=float) + self.mirror.bearing_offset_rad
-
-    def bearing_of_image_angle(self, alpha: np.ndarray) -> np.ndarray:
-        sign = -1.0 if self.mirror.mirrored else 1.0
-        return sign * (np.asarray(alpha, dtype=float) - self.mirror.bearing_offset_rad)
+        return self.azimuth.image_angle(bearing)
 
     def image_point(self, row: np.ndarray, bearing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Raw image (u, v) in pixels of panorama row ``row`` looking along ``bearing``."""
@@ -157,10 +173,8 @@ class MirrorModel:
         of raw image point (u, v); the elevation is NaN where the pixel misses the mirror."""
         du = np.asarray(u, dtype=float) - self.mirror.center_x_px
         dv = self.mirror.center_y_px - np.asarray(v, dtype=float)
-        bearing = self.bearing_of_image_angle(np.arctan2(dv, du))
-        bearing = np.mod(bearing + math.pi, 2.0 * math.pi) - math.pi
-        bearing = np.where(bearing == -math.pi, math.pi, bearing)
-        return bearing, self.elevation_of_radius(np.hypot(du, dv))
+        return (self.azimuth.bearing(np.arctan2(dv, du)),
+                self.elevation_of_radius(np.hypot(du, dv)))
 
     def row_radius_range(self) -> tuple[float, float]:
         """Image radii of the bottom and top panorama rows (for checks and rendering)."""

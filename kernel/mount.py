@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kernel.angles import wrap_angle
-from kernel.se2 import SE2, UncertainSE2
+from kernel.se2 import SE2, UncertainSE2, compose_many
 from kernel.types import Odometry
 
 
@@ -57,11 +57,10 @@ class Mount:
         """:meth:`robot_pose` of N x 3 (x, y, yaw) poses at once (a particle cloud)."""
         if self.centred:
             return camera_poses
-        a, b, turn = self.robot_camera.inverse().as_tuple()
         p = np.asarray(camera_poses, dtype=float)
-        c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
-        return np.stack([p[:, 0] + c * a - s * b, p[:, 1] + s * a + c * b,
-                         np.asarray(wrap_angle(p[:, 2] + turn))], axis=1)
+        x, y, yaw = compose_many((p[:, 0], p[:, 1], p[:, 2]),
+                                 self.robot_camera.inverse().as_tuple())
+        return np.stack([x, y, np.asarray(wrap_angle(yaw))], axis=1)
 
     def camera_pose(self, robot_pose: SE2) -> SE2:
         """T_x_camera of T_x_robot."""

@@ -78,6 +78,19 @@ class SE2:
                          [0.0, 0.0, -1.0]])
 
 
+Poses = tuple[np.ndarray, np.ndarray, np.ndarray]  # x, y, yaw of many poses at once
+
+
+def compose_many(a: Poses | tuple[float, float, float], b: Poses | tuple[float, float, float]
+                 ) -> Poses:
+    """a ∘ b pose by pose (:meth:`SE2.compose` over arrays that broadcast; the yaw is
+    not wrapped)."""
+    ax, ay, at = a
+    bx, by, bt = b
+    c, s = np.cos(at), np.sin(at)
+    return ax + c * bx - s * by, ay + s * bx + c * by, np.add(at, bt)
+
+
 def turned_covariance(covariance: np.ndarray, yaw: float) -> np.ndarray:
     """A 3 x 3 covariance of (x, y, yaw) expressed in a frame turned by ``yaw``
     (R Σ Rᵀ, R the rotation by yaw about the vertical; the yaw variance is unchanged)."""

@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from daemon.localisation.settings import LocalisationSettings
+from kernel.se2 import SE2, compose_many
 
 
 def motion_sigmas(motion: tuple[float, float, float], dt_s: float,
@@ -61,26 +62,14 @@ def _predict_mounted(particles: np.ndarray, motion: tuple[float, float, float], 
                      s: LocalisationSettings, rng: np.random.Generator,
                      mount: tuple[float, float, float]) -> None:
     """:func:`predict` with the camera at ``mount`` on the robot."""
-    mx, my, mt = mount
-    cm, sm = math.cos(mt), math.sin(mt)
-    inv = (-cm * mx - sm * my, sm * mx - cm * my, -mt)  # M⁻¹
-
-    def conjugate(a: tuple[float, float, float], x: np.ndarray, y: np.ndarray, t: np.ndarray,
-                  b: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """a ∘ (x, y, t) ∘ b for arrays of (x, y, t)."""
-        ct, st = np.cos(t), np.sin(t)
-        x1, y1, t1 = x + ct * b[0] - st * b[1], y + st * b[0] + ct * b[1], t + b[2]
-        ca, sa = math.cos(a[2]), math.sin(a[2])
-        return a[0] + ca * x1 - sa * y1, a[1] + sa * x1 + ca * y1, t1 + a[2]
-
-    rx, ry, rt = (float(v[0]) for v in conjugate(mount, np.array([motion[0]]),
-                                                  np.array([motion[1]]),
-                                                  np.array([motion[2]]), inv))
+    inv = SE2(*mount).inverse().as_tuple()
+    rx, ry, rt = (float(v) for v in compose_many(compose_many(mount, motion), inv))  # Δr
     sigma_xy, sigma_yaw = motion_sigmas((rx, ry, rt), dt_s, s)
     n = len(particles)
     noise = rng.standard_normal((n, 3))
-    ux, uy, ut = conjugate(inv, rx + sigma_xy * noise[:, 0], ry + sigma_xy * noise[:, 1],
-                           rt + sigma_yaw * noise[:, 2], mount)
+    noisy = (rx + sigma_xy * noise[:, 0], ry + sigma_xy * noise[:, 1],
+             rt + sigma_yaw * noise[:, 2])
+    ux, uy, ut = compose_many(compose_many(inv, noisy), mount)  # M⁻¹ Δr' M
     c, sn = np.cos(particles[:, 2]), np.sin(particles[:, 2])
     particles[:, 0] += c * ux - sn * uy
     particles[:, 1] += sn * ux + c * uy

@@ -305,9 +305,8 @@ class Renderer:
         du, dv = u - m.center_x_px, m.center_y_px - v
         r = np.hypot(du, dv)
         alpha = np.arctan2(dv, du)
-        bearing = model.bearing_of_image_angle(alpha)
-        col = np.mod((math.pi - np.asarray(bearing)) * self._band_cols / (2 * math.pi) - 0.5,
-                     self._band_cols)
+        bearing = model.azimuth.bearing(alpha)
+        col = self._band_column(bearing)
         if m.model == "hyperboloid":
             phis = np.radians(np.linspace(-89.0, 89.0, 4000))
             radii = hyperboloid_radius(phis, m.a_m, m.b_m, m.focal_px)
@@ -332,6 +331,12 @@ class Renderer:
         row = np.where(r > m.r_outer_px, self._band_rows + 2.0, row)
         self._map_x = np.asarray(col, np.float32)
         self._map_y = np.asarray(row, np.float32)
+
+    def _band_column(self, bearing: np.ndarray) -> np.ndarray:
+        """Fractional band column of ``bearing`` (the panorama's column rule, kernel/panorama.py,
+        over the band's columns, the seam wrapped)."""
+        return np.mod((math.pi - np.asarray(bearing)) * self._band_cols / (2 * math.pi) - 0.5,
+                      self._band_cols)
 
     BAND_ROWS_MAX = 720
     BAND_MARGIN_DEG = 5.0
@@ -360,8 +365,7 @@ class Renderer:
         self._band_rows = min(self.BAND_ROWS_MAX, int(math.ceil(
             (self._band_top - self._band_bottom) / step)))
         self._band_cols = self.pano.width * SUPERSAMPLE
-        col = np.mod((math.pi - np.asarray(bearing)) * self._band_cols / (2 * math.pi) - 0.5,
-                     self._band_cols)
+        col = self._band_column(bearing)
         row = (self._band_top - np.clip(phi, self._band_bottom, self._band_top)) * (
             self._band_rows / (self._band_top - self._band_bottom)) - 0.5
         with np.errstate(invalid="ignore"):
