@@ -2,10 +2,24 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 from kernel.settings import setting
+
+_AZIMUTH_DOC = "image azimuth of the robot's forward axis"
+
+
+def _bearing_offset(doc: str) -> Any:
+    """The azimuth offset of a camera model (kernel/mirror.py Azimuth), in (−π, π]."""
+    return setting(0.0, ge=-math.pi, le=math.pi, doc=doc)
+
+
+def _mirrored(more: str) -> Any:
+    """Whether a radial camera model's image is mirrored (kernel/mirror.py Azimuth)."""
+    return setting(True, doc="image azimuth runs clockwise for counter-clockwise bearings"
+                   + more)
 
 
 @dataclass(frozen=True)
@@ -26,13 +40,8 @@ class MirrorSettings:
     # Polynomial model: normalised radius (0 at r_inner, 1 at r_outer) as a polynomial
     # of the normalised panorama row counted from the bottom (0) to the top (1).
     poly_coeffs: list[float] = setting([0.0, 1.0], doc="radial polynomial, lowest order first")
-    bearing_offset_rad: float = setting(
-        0.0, ge=-3.141592653589793, le=3.141592653589793,
-        doc="image azimuth of the robot's forward axis",
-    )
-    mirrored: bool = setting(
-        True, doc="image azimuth runs clockwise for counter-clockwise bearings"
-    )
+    bearing_offset_rad: float = _bearing_offset(_AZIMUTH_DOC)
+    mirrored: bool = _mirrored("")
 
     def __post_init__(self) -> None:
         if self.r_outer_px <= self.r_inner_px:
@@ -63,7 +72,6 @@ class PanoramaSettings:
 
 CameraModelName = Literal["mirror", "ocamcalib", "fisheye", "equirectangular", "dual-fisheye"]
 
-_AZIMUTH_DOC = "image azimuth of the robot's forward axis"
 
 
 @dataclass(frozen=True)
@@ -87,10 +95,8 @@ class OcamcalibSettings:
                                    "of the world (a mirror's inner rim; 0: none)")
     max_radius_px: float = setting(0.0, ge=0.0, doc="pixels further out see nothing (the "
                                    "outer rim; 0: the image's edge)")
-    mirrored: bool = setting(True, doc="image azimuth runs clockwise for counter-clockwise "
-                             "bearings")
-    bearing_offset_rad: float = setting(0.0, ge=-3.141592653589793, le=3.141592653589793,
-                                        doc=_AZIMUTH_DOC)
+    mirrored: bool = _mirrored("")
+    bearing_offset_rad: float = _bearing_offset(_AZIMUTH_DOC)
 
     def __post_init__(self) -> None:
         if len(self.affine) != 3:
@@ -121,10 +127,8 @@ class FisheyeSettings:
     radius_px: float = setting(235.0, gt=0.0, doc="image circle's radius (equidistant)")
     fov_deg: float = setting(220.0, gt=0.0, le=360.0, doc="the lens's field of view: "
                              "directions further than half of it from the zenith are not seen")
-    mirrored: bool = setting(True, doc="image azimuth runs clockwise for counter-clockwise "
-                             "bearings (so it does for a camera looking up)")
-    bearing_offset_rad: float = setting(0.0, ge=-3.141592653589793, le=3.141592653589793,
-                                        doc=_AZIMUTH_DOC)
+    mirrored: bool = _mirrored(" (so it does for a camera looking up)")
+    bearing_offset_rad: float = _bearing_offset(_AZIMUTH_DOC)
 
     def __post_init__(self) -> None:
         k = self.camera_matrix
@@ -146,8 +150,7 @@ class EquirectangularSettings:
     height_px: int = setting(640, ge=8, doc="frame height (180 degrees)")
     horizon_row_px: float = setting(319.5, doc="row of elevation 0 (the middle row of a "
                                     "level camera)")
-    bearing_offset_rad: float = setting(0.0, ge=-3.141592653589793, le=3.141592653589793,
-                                        doc="bearing seen by the frame's middle column")
+    bearing_offset_rad: float = _bearing_offset("bearing seen by the frame's middle column")
 
 
 @dataclass(frozen=True)
@@ -163,5 +166,4 @@ class DualFisheyeSettings:
     front_center_y_px: float = setting(319.5, ge=0.0, doc="front lens's centre, row")
     back_center_x_px: float = setting(959.5, ge=0.0, doc="back lens's centre, column")
     back_center_y_px: float = setting(319.5, ge=0.0, doc="back lens's centre, row")
-    bearing_offset_rad: float = setting(0.0, ge=-3.141592653589793, le=3.141592653589793,
-                                        doc="bearing of the front lens's axis")
+    bearing_offset_rad: float = _bearing_offset("bearing of the front lens's axis")
