@@ -16,7 +16,8 @@ the map), ``ambiguous_frames`` (frames at which the top two stayed within
 ``ambiguous_trials`` (the share of trials with at least one), ``disambiguation_accuracy``
 (the share of those decisions naming a right place), ``mlp_accuracy_with`` and
 ``mlp_accuracy_without`` (the belief's place right, over every frame of every trial),
-``right_at_end_with`` / ``right_at_end_without`` (right at the trial's last frame),
+``mlp_gain`` (with minus without), ``right_at_end_with`` / ``right_at_end_without``
+(right at the trial's last frame),
 ``disambiguation_ms`` (median time of one decision, per pair of look-alikes compared:
 a decision among k places compares every pair of them that has features).
 """
@@ -33,6 +34,10 @@ import numpy as np
 
 from tools.eval.lockstep import Run
 from tools.eval.tour_map import Point, add_map_arguments, mapped_run, right_place
+
+SEED_COLUMNS = ("ambiguous_frames", "disambiguation_accuracy", "mlp_accuracy_with",
+                "mlp_accuracy_without", "mlp_gain", "right_at_end_with",
+                "right_at_end_without")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -106,6 +111,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                                              4) if decisions else None,
             "mlp_accuracy_with": accuracy("with"),
             "mlp_accuracy_without": accuracy("without"),
+            "mlp_gain": round(accuracy("with") - accuracy("without"), 4),
             "right_at_end_with": round(sum(t[-1].right for t in runs["with"]) / n, 4),
             "right_at_end_without": round(sum(t[-1].right for t in runs["without"]) / n, 4),
             "disambiguation_ms": round(float(np.median([f.decision_ms for f in decisions])),

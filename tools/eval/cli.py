@@ -1,10 +1,13 @@
-"""``placecell-eval EXPERIMENT [--world-kind K] [--world-seed N] [--seed N] [--json]
-[--plots DIR]``
+"""``placecell-eval EXPERIMENT [--world-kind K] [--world-seed N | --seeds A-B [--jobs N]]
+[--seed N] [--json] [--plots DIR]``
 
 Each experiment lives in ``tools/eval/<module>.py`` and provides
 ``add_arguments(parser)`` and ``run(args) -> dict`` returning ``{"metrics": {...},
 "config": {...}}`` (plus optional ``"world"``). This file dispatches and prints one JSON
-object ``{"experiment", "world": {kind, seed}, "seed", "config", "metrics"}``.
+object ``{"experiment", "world": {kind, seed}, "seed", "config", "metrics"}``. With
+``--seeds`` it runs on each world seed (tools/eval/seeds.py): ``world`` names the seeds,
+``metrics`` holds each metric's mean, min and max over them and ``per_seed`` every seed's
+metrics; the text output is the per-seed table of the experiment's ``SEED_COLUMNS``.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from typing import Any
 
 from kernel.camera_models import MODEL_NAMES
 from kernel.errors import PlacecellError
+from tools.eval.seeds import parse_seeds, run_seeds, table
 
 # experiment -> (module, default world kind, one-line help)
 EXPERIMENTS: dict[str, tuple[str, str, str]] = {
@@ -63,6 +67,11 @@ def main(argv: list[str] | None = None) -> int:
         p.set_defaults(_module=module_name)
         p.add_argument("--world-kind", default=world_kind or None)
         p.add_argument("--world-seed", type=int, default=1)
+        p.add_argument("--seeds", type=parse_seeds, metavar="A-B",
+                       help="run on each of these world seeds (A-B, or a list: 1,3,5-7) "
+                       "and print the per-seed table and its mean, min and max")
+        p.add_argument("--jobs", type=int, default=1,
+                       help="with --seeds: worlds run at once, each in its own process")
         p.add_argument("--seed", type=int, default=1, help="seed of the experiment's randomness")
         p.add_argument("--json", action="store_true", help="print one JSON object")
         p.add_argument("--plots", metavar="DIR", help="write PNG figures of the experiment here")
@@ -76,22 +85,37 @@ def main(argv: list[str] | None = None) -> int:
     if args.camera_model != "mirror" and not getattr(importlib.import_module(args._module),
                                                      "CAMERA_MODELS", False):
         parser.error(f"{args.experiment} runs on the mirror camera only: drop --camera-model")
+    if args.seeds and args.plots:
+        parser.error("--plots draws one world's figures: drop --seeds")
+    if args.jobs < 1:
+        parser.error(f"--jobs {args.jobs}: at least 1")
     logging.basicConfig(level=logging.WARNING if args.json else logging.INFO,
                         format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+    module = importlib.import_module(args._module)
     try:
-        result: dict[str, Any] = importlib.import_module(args._module).run(args)
+        result: dict[str, Any] = (run_seeds(args._module, args, args.seeds, args.jobs)
+                                  if args.seeds else module.run(args))
     except PlacecellError as e:
         print(f"placecell-eval {args.experiment}: error: {e}", file=sys.stderr)
         return 2
     out = {
         "experiment": args.experiment,
-        "world": result.get("world", {"kind": args.world_kind, "seed": args.world_seed}),
+        "world": ({"kind": args.world_kind, "seeds": args.seeds} if args.seeds else
+                  result.get("world", {"kind": args.world_kind, "seed": args.world_seed})),
         "seed": args.seed,
         "config": {**result.get("config", {}), "camera_model": args.camera_model},
         "metrics": result["metrics"],
     }
+    if args.seeds:
+        out["per_seed"] = result["per_seed"]
     if args.json:
         print(json.dumps(out, indent=2, sort_keys=True))
+    elif args.seeds:
+        per_seed = result["per_seed"]
+        columns = getattr(module, "SEED_COLUMNS", None) or [
+            k for k, v in next(iter(per_seed.values())).items()
+            if isinstance(v, int | float) and not isinstance(v, bool)]
+        print(table(per_seed, list(columns)))
     else:
         for key, value in out["metrics"].items():
             print(f"{key:32s} {value}")

@@ -33,6 +33,8 @@ from tools.eval.tour_map import Point, add_map_arguments, mapped_run, right_plac
 CAMERA_MODELS = True  # --camera-model M: any of kernel/camera_models.py MODEL_NAMES
 
 START_FRAMES = 5
+SEED_COLUMNS = ("detected_within_5", "right_place_within_10", "right_place_within_15",
+                "error_within_0p2_at_10", "error_m_median_at_10")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
