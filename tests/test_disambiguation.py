@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
-from daemon.mapping.lookalikes import likeliest, own_feature
+from daemon.mapping.lookalikes import likeliest, own_feature, pair_features
 from daemon.store.sqlite_store import MapStore
 from daemon.vision.disambiguation import (
     Feature,
@@ -115,9 +115,31 @@ def test_the_new_places_feature_is_absent_from_every_look_alike_not_just_one() -
     own = [_wrap(a), _wrap(_moved(a, rng, 3))]
     against_b = find_feature(own, [_wrap(b)], M)
     assert _on(against_b, *SIGN) and best_ncc(_wrap(c), against_b) > 0.95
-    feature = own_feature(own, [_wrap(b), _wrap(c)], M)
+    feature = own_feature(own, [[_wrap(b)], [_wrap(c)]], M)
     assert _on(feature, *plant), (feature.col, feature.row)
     assert best_ncc(_wrap(c), feature) < 0.6 and feature.other_ncc < 0.6, feature
+
+
+def test_the_older_places_feature_is_scored_over_its_learning_views() -> None:
+    """B learned first, A (with the sign) now. B's feature against A: with B's
+    reference alone, a patch that only B's reference shows (a flicker) scores best;
+    with B's learning views kept (design §5, schema 8) it must survive them, so a patch
+    B always shows (a plate) is chosen, its own NCC measured (below 1), not assumed."""
+    rng = np.random.default_rng(8)
+    a, b = _aliased_pair(rng)
+    b[56:88, 500:532] = (np.kron(rng.integers(0, 2, (8, 8)), np.ones((4, 4))) * 200 + 30
+                         ).astype(np.uint8)  # a plate only B has, seen from anywhere
+    flicker = b.copy()
+    flicker[40:72, 100:132] = rng.integers(0, 256, (32, 32))  # in B's reference only
+    new = [_wrap(a), _wrap(_moved(a, rng, 2))]
+    b_views = [_wrap(_moved(b, rng, 2)), _wrap(_moved(b, rng, -2))]
+    (alone,) = pair_features(2, new, {1: [_wrap(flicker)]}, M)
+    (kept,) = pair_features(2, new, {1: [_wrap(flicker), *b_views]}, M)
+    assert (alone.a_id, alone.b_id) == (2, 1)
+    assert alone.b.own_ncc == 1.0 and _on(alone.b, 100, 40, 32), alone.b
+    assert kept.b.own_ncc < 1.0 and _on(kept.b, 500, 56, 32), kept.b
+    assert np.array_equal(alone.a.template, kept.a.template)  # A's own: B's views add
+    assert kept.a.other_ncc >= alone.a.other_ncc  # places to be ruled out, never fewer
 
 
 @pytest.mark.parametrize("shift", [0, 37, -150, 355])
@@ -228,5 +250,12 @@ def test_the_daemons_pipeline_learns_look_alikes_features_and_uses_them(
         assert belief.state == "tracking" and belief.place_id == second.id, belief
     with MapStore.open(tmp_path / "map.db", None) as store:
         (stored,) = store.features()
+        views = {p: store.views(p) for p in (first.id, second.id)}
+    # each place's learning views kept (schema 8): the older place's feature against the
+    # newer was scored over them, not over its reference alone (own NCC 1)
+    assert [len(v) for v in views.values()] == [4, 4], views
+    assert all(v.dtype == np.uint8 and v.ndim == 2 for vs in views.values() for v in vs)
+    older = pair.a if pair.a_id == first.id else pair.b
+    assert older.own_ncc < 1.0, older
     mine = pair.a if pair.a_id == stored.a_id else pair.b  # stored lower id first
     assert np.array_equal(stored.a.template, mine.template)

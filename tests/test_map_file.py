@@ -182,6 +182,7 @@ def test_version_2_map_keeps_its_places_and_gains_background_estimates(tmp_path:
     db.execute("DROP TABLE resume")
     db.execute("DROP TABLE features")
     db.execute("DROP TABLE floor")
+    db.execute("DROP TABLE views")
     db.execute("UPDATE meta SET value = '2' WHERE key = 'schema_version'")
     db.commit()
     db.close()
@@ -252,6 +253,8 @@ def test_export_then_import_gives_the_same_map(tmp_path: Path) -> None:
         store.set_background(2, 0.68)
         store.put_features(pair)
         store.save_floor(floor, 100.0)
+        views = [rng.integers(0, 256, (20, 60)).astype(np.uint8) for _ in range(3)]
+        store.put_views(2, views)
         assert export_map(store, tmp_path / "out") == 2
         original = store.load()
         panoramas = [store.reference_panorama(p.id) for p in original.places]
@@ -260,6 +263,8 @@ def test_export_then_import_gives_the_same_map(tmp_path: Path) -> None:
         again = copy.load()
         assert all(np.array_equal(pano, copy.reference_panorama(p.id))
                    for pano, p in zip(panoramas, again.places, strict=True))
+        assert copy.views(1) == [] and len(copy.views(2)) == 3  # learning views, design §5
+        assert all(np.array_equal(a, b) for a, b in zip(copy.views(2), views, strict=True))
     for a, b in zip(original.places, again.places, strict=True):
         assert (a.id, a.label, a.background_lrp) == (b.id, b.label, b.background_lrp)
         assert a.landmarks.templates().tobytes() == b.landmarks.templates().tobytes()
@@ -392,6 +397,7 @@ def test_version_4_map_gains_the_features_table_and_keeps_the_rest(tmp_path: Pat
     db.execute("DROP TABLE features")
     db.execute("DROP TABLE floor")
     db.execute("ALTER TABLE places DROP COLUMN background_cross")
+    db.execute("DROP TABLE views")
     db.execute("UPDATE meta SET value = '4' WHERE key = 'schema_version'")
     db.commit()
     db.close()
@@ -399,7 +405,7 @@ def test_version_4_map_gains_the_features_table_and_keeps_the_rest(tmp_path: Pat
     fa = Feature(40, 8, rng.integers(0, 256, (24, 24)).astype(np.uint8), 0.95, 0.31)
     fb = Feature(600, 16, rng.integers(0, 256, (16, 16)).astype(np.uint8), 0.9, 0.42)
     with MapStore.open(path, GEOMETRY) as store:
-        assert store.meta("schema_version") == str(SCHEMA_VERSION) == "7"
+        assert store.meta("schema_version") == str(SCHEMA_VERSION) == "8"
         assert [p.label for p in store.load().places] == ["dock", "door"]
         assert store.transition_count() == 2 and store.saved_pose() is not None
         assert store.features() == []
@@ -420,13 +426,14 @@ def test_the_floor_model_is_kept_with_the_map_and_a_damaged_one_named(tmp_path: 
     db = sqlite3.connect(path)
     db.execute("DROP TABLE floor")
     db.execute("ALTER TABLE places DROP COLUMN background_cross")
+    db.execute("DROP TABLE views")
     db.execute("UPDATE meta SET value = '5' WHERE key = 'schema_version'")
     db.commit()
     db.close()
     histogram = np.zeros((256, 256), np.uint8)
     histogram[80, 90] = 255
     with MapStore.open(path, GEOMETRY) as store:
-        assert store.meta("schema_version") == "7" and store.floor() is None
+        assert store.meta("schema_version") == "8" and store.floor() is None
         store.save_floor(FloorModel(ColourModel(histogram), 0.2), 10.0)
         store.save_floor(FloorModel(ColourModel(histogram), 0.3), 20.0)
     with MapStore.open(path, GEOMETRY) as store:
@@ -453,11 +460,12 @@ def test_version_6_map_gains_the_backgrounds_in_the_other_places_views(tmp_path:
     _two_places(path).close()
     db = sqlite3.connect(path)
     db.execute("ALTER TABLE places DROP COLUMN background_cross")
+    db.execute("DROP TABLE views")
     db.execute("UPDATE meta SET value = '6' WHERE key = 'schema_version'")
     db.commit()
     db.close()
     with MapStore.open(path, GEOMETRY) as store:
-        assert store.meta("schema_version") == "7"
+        assert store.meta("schema_version") == "8"
         assert [p.background_cross for p in store.load().places] == [None, None]
     with MapStore.open(path, GEOMETRY, readonly=True) as store:
         Mapper(store, OdometryNoiseSettings())
@@ -467,3 +475,35 @@ def test_version_6_map_gains_the_backgrounds_in_the_other_places_views(tmp_path:
         stored = [p.background_cross for p in store.load().places]
         assert all(c is not None and -1.0 <= c <= 1.0 for c in stored), stored
         assert [p.background_cross for p in mapper.graph.places] == stored
+
+
+def test_version_7_map_gains_the_learning_views_and_a_damaged_one_is_named(
+        tmp_path: Path) -> None:
+    """Schema 8 (design §5): each place's learning views (grey, with their wrap margin),
+    kept for the features of look-alikes learned later; a version 7 file gains the
+    empty table (its places have none: their features are scored on the reference)."""
+    path = tmp_path / "v7.db"
+    _two_places(path).close()
+    db = sqlite3.connect(path)
+    db.execute("DROP TABLE views")
+    db.execute("UPDATE meta SET value = '7' WHERE key = 'schema_version'")
+    db.commit()
+    db.close()
+    rng = np.random.default_rng(3)
+    views = [rng.integers(0, 256, (24, 80)).astype(np.uint8) for _ in range(4)]
+    with MapStore.open(path, GEOMETRY) as store:
+        assert store.meta("schema_version") == "8" and store.views(1) == []
+        store.put_views(1, views[:2])
+        store.put_views(1, views)  # replaced whole, not added to
+    with MapStore.open(path, GEOMETRY, readonly=True) as store:
+        kept = store.views(1)
+        assert store.views(2) == []
+    assert len(kept) == 4 and all(np.array_equal(a, b) for a, b in zip(kept, views,
+                                                                       strict=True))
+    db = sqlite3.connect(path)
+    db.execute("UPDATE views SET panorama = ? WHERE place_id = 1 AND k = 2", (b"\x89PNG",))
+    db.commit()
+    db.close()
+    with MapStore.open(path, GEOMETRY) as store, pytest.raises(
+            MapStoreError, match="place 1's learning view 2 is damaged"):
+        store.views(1)

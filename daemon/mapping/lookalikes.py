@@ -11,8 +11,9 @@ place learned first stands 0.19 below a plain place in the plain place's views, 
 level with it in its own (design §5). The pairs' features are found
 (daemon/vision/disambiguation.py): the new place's one feature against every
 look-alike's reference view at once, scored over the new place's views so it survives
-small moves; each look-alike's against the new place's views. Pure: the service's mapper
-stores what this returns.
+small moves; each look-alike's against the new place's views, scored over the
+look-alike's own learning views (kept with the map since schema 8). Pure: the service's
+mapper stores what this returns.
 """
 
 from __future__ import annotations
@@ -78,21 +79,27 @@ def lookalikes(views: list[np.ndarray], own: PreparedTemplates, own_background: 
 
 
 def pair_features(new_id: int, new_views: list[np.ndarray],
-                  references: dict[int, np.ndarray], margin: int) -> list[PairFeatures]:
+                  lookalike_views: dict[int, list[np.ndarray]], margin: int
+                  ) -> list[PairFeatures]:
     """The features of the new place (views: its reference first) and each look-alike
-    (id → grey reference view): the new place's one feature (:func:`own_feature`), and
-    each look-alike's against the new place's views."""
-    if not references:
+    (id → its grey views, the reference first, then its learning views if the map kept
+    them): the new place's one feature (:func:`own_feature`), and each look-alike's
+    against the new place's views, scored over the look-alike's own views. A feature
+    scored on its reference alone counts on matching as it does there (own NCC 1), and
+    a robot a little off the reference sees it match far less: on aliased-corridor
+    seed 101 every older place's vote fell below the newest one's, and the decisions
+    named the newest place on 3 of 32 ambiguous frames where it was 4-5 m away."""
+    if not lookalike_views:
         return []
-    mine = own_feature(new_views, list(references.values()), margin)
-    return [PairFeatures(new_id, other_id, mine, find_feature([reference], new_views, margin))
-            for other_id, reference in references.items()]
+    mine = own_feature(new_views, list(lookalike_views.values()), margin)
+    return [PairFeatures(new_id, other_id, mine, find_feature(views, new_views, margin))
+            for other_id, views in lookalike_views.items()]
 
 
-def own_feature(new_views: list[np.ndarray], references: list[np.ndarray],
+def own_feature(new_views: list[np.ndarray], lookalike_views: list[list[np.ndarray]],
                 margin: int) -> Feature:
-    """The new place's feature against every look-alike's reference view at once: a
-    patch that tells it from one look-alike but is seen at another would vote for it
-    there (seed 2 of the aliased corridor: a 16 px patch of its far end, 0.82 at home,
-    0.92 between two other places)."""
-    return find_feature(new_views, references, margin)
+    """The new place's feature against every look-alike's views at once: a patch that
+    tells it from one look-alike but is seen at another would vote for it there (seed 2
+    of the aliased corridor: a 16 px patch of its far end, 0.82 at home, 0.92 between
+    two other places)."""
+    return find_feature(new_views, [v for views in lookalike_views for v in views], margin)

@@ -282,7 +282,9 @@ class Mapper:
                        settings: LocalisationSettings) -> list[PairFeatures]:
         """The disambiguating features of a place just learned and each of its look-alikes
         (design §5), stored and in the map; ``views``: grey panoramas taken half-way out
-        along the arms of its Turn Back and Look cross. A read-only map gets none."""
+        along the arms of its Turn Back and Look cross, stored with the place so that a
+        later look-alike's features are scored over them too. A read-only map gets
+        none."""
         if self.store.readonly or settings.max_lookalikes == 0:
             return []
         with self._lock:
@@ -307,7 +309,9 @@ class Mapper:
                            _background(place, settings.background_lrp), others,
                            settings.lookalike_margin,
                            settings.max_lookalikes)
-        pairs = pair_features(place_id, own_views, {o: others[o].reference for o in found},
+        self.store.put_views(place_id, views)
+        pairs = pair_features(place_id, own_views,
+                              {o: [others[o].reference, *self.store.views(o)] for o in found},
                               margin)
         for pair in pairs:
             with self._lock:

@@ -7,8 +7,9 @@ directions), ``features.json`` (the disambiguating features of look-alike pairs,
 §5: position, scores and template bytes in base64; an export without it imports with
 none), ``floor.json`` (the floor model the local space profiles were made with, design
 §4; absent when none was learned), and per place ``place-<id>.png`` (the reference
-panorama with its landmarks drawn, for people) and ``place-<id>-reference.png`` (the
-panorama itself, lossless).
+panorama with its landmarks drawn, for people), ``place-<id>-reference.png`` (the
+panorama itself, lossless) and ``place-<id>-view-<k>.png`` (its learning views, grey,
+design §5; listed in the place's ``views``, absent for a place without them).
 """
 
 from __future__ import annotations
@@ -45,10 +46,14 @@ def export_map(store: MapStore, folder: str | Path) -> int:
     graph = store.load()
     places = []
     for place in graph.places:
-        places.append(_place_json(place))
+        views = store.views(place.id)
+        places.append(_place_json(place) | {
+            "views": [f"place-{place.id}-view-{k}.png" for k in range(len(views))]})
         panorama = store.reference_panorama(place.id)
         _write_png(out / f"place-{place.id}.png", draw_landmarks(panorama, place.landmarks))
         _write_png(out / f"place-{place.id}-reference.png", panorama)
+        for k, view in enumerate(views):
+            _write_png(out / f"place-{place.id}-view-{k}.png", view)
     transitions = [_transition_json(t) for t in store.transitions()]
     features = [_pair_json(pair) for pair in store.features()]
     _write_json(out / "places.json", places)
@@ -80,6 +85,8 @@ def import_map(folder: str | Path, path: str | Path) -> int:
         else []
     try:
         places = [_place_from_json(d, src) for d in places_doc]
+        views = {int(d["id"]): [_read_view(src, str(name), d["id"])
+                                for name in d.get("views", [])] for d in places_doc}
         transitions = [_transition_from_json(d) for d in transitions_doc]
         features = [_pair_from_json(d) for d in features_doc]
         floor = _floor_from_json(_read_json(src / "floor.json")) \
@@ -93,6 +100,9 @@ def import_map(folder: str | Path, path: str | Path) -> int:
     try:
         with store:
             store.import_places(places, transitions, features)
+            for place_id, place_views in views.items():
+                if place_views:
+                    store.put_views(place_id, place_views)
             if floor is not None:
                 store.save_floor(floor, time.time())
         os.replace(tmp, dst)
@@ -206,6 +216,13 @@ def _floor_from_json(d: dict[str, Any]) -> FloorModel:
         raise ValueError(f"a floor colour histogram has {BINS * BINS} bytes, got {len(raw)}")
     return FloorModel(ColourModel(np.frombuffer(raw, np.uint8).reshape(BINS, BINS).copy()),
                       float(d["gradient_threshold"]))
+
+
+def _read_view(src: Path, name: str, place_id: Any) -> np.ndarray:
+    view = cv2.imread(str(src / name), cv2.IMREAD_UNCHANGED)
+    if view is None or view.ndim != 2 or view.dtype != np.uint8:
+        raise ValueError(f"place {place_id}: {name} is not a grey 8-bit image")
+    return view
 
 
 def _write_png(path: Path, image: np.ndarray) -> None:

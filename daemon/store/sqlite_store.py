@@ -40,7 +40,7 @@ from kernel.se2 import SE2, UncertainSE2
 
 log = logging.getLogger(__name__)
 
-SCHEMA_VERSION = 7
+SCHEMA_VERSION = 8
 APPLICATION = "placecell-map"
 
 _SCHEMA = """
@@ -100,7 +100,17 @@ CREATE TABLE floor (                                      -- v6: the floor model
     learned_unix_s REAL NOT NULL
 )
 """
-_SCHEMA += ";" + _RESUME_TABLE + ";" + _FEATURES_TABLE + ";" + _FLOOR_TABLE
+_VIEWS_TABLE = """
+CREATE TABLE views (                                      -- v8: learning views (design §5)
+    place_id  INTEGER NOT NULL REFERENCES places(id),     -- the place seen a little off
+    k         INTEGER NOT NULL,                           -- 0, 1, ...: the cross's arms
+    panorama  BLOB NOT NULL,                              -- grey with its wrap margin, PNG
+    digest    TEXT NOT NULL,                              -- sha256 over panorama
+    PRIMARY KEY (place_id, k)
+)
+"""
+_SCHEMA += ";" + _RESUME_TABLE + ";" + _FEATURES_TABLE + ";" + _FLOOR_TABLE + ";" \
+    + _VIEWS_TABLE
 
 
 _PLACE_COLUMNS = ("id, label, created_unix_s, background_lrp, landmarks, local_space, "
@@ -416,6 +426,32 @@ class MapStore:
                  np.ascontiguousarray(f.template, dtype=np.uint8).tobytes(),
                  float(f.own_ncc), float(f.other_ncc)))
 
+    def put_views(self, place_id: int, views: Sequence[np.ndarray]) -> None:
+        """Store (replacing any) a place's learning views: grey panoramas with their wrap
+        margin, taken half-way out along the arms of its Turn Back and Look cross. A
+        later look-alike's features are scored over them (design §5)."""
+        self._writable()
+        blobs = [codec.encode_image(np.ascontiguousarray(v, dtype=np.uint8)) for v in views]
+        with self._lock, _transaction(self._db):
+            self._db.execute("DELETE FROM views WHERE place_id = ?", (place_id,))
+            self._db.executemany(
+                "INSERT INTO views(place_id, k, panorama, digest) VALUES (?, ?, ?, ?)",
+                [(place_id, k, blob, codec.digest(blob)) for k, blob in enumerate(blobs)])
+
+    def views(self, place_id: int) -> list[np.ndarray]:
+        """A place's learning views, in the order stored (none: a place learned before
+        schema 8, or imported without them)."""
+        rows = self._all("SELECT k, panorama, digest FROM views WHERE place_id = ? "
+                         "ORDER BY k", (place_id,))
+        out = []
+        for k, blob, stored in rows:
+            where = f"{self.path}: place {place_id}'s learning view {k}"
+            if codec.digest(blob) != stored:
+                raise MapStoreError(f"{where} is damaged (its bytes do not match their "
+                                    "digest)")
+            out.append(codec.decode_image(bytes(blob), where))
+        return out
+
     def features(self) -> list[PairFeatures]:
         """Every pair's features (each pair once, the lower id first)."""
         rows = self._all("SELECT place_id, other_id, col, row, template, own_ncc, other_ncc "
@@ -643,7 +679,8 @@ def _migrate(db: sqlite3.Connection, p: Path, version: int) -> None:
     daemon's mapper finds the look-alike pairs and their features); 2 to 5 gain the
     floor table (no floor model: the localiser learns one from its first colour frame);
     2 to 6 gain places.background_cross (NULL: the daemon's mapper measures it from the
-    stored reference panoramas)."""
+    stored reference panoramas); 2 to 7 gain the views table (no learning views: an
+    older place's features are scored over its reference alone, as before)."""
     with _transaction(db):
         if version == 2:
             db.execute("ALTER TABLE places ADD COLUMN background_estimate REAL")
@@ -656,6 +693,8 @@ def _migrate(db: sqlite3.Connection, p: Path, version: int) -> None:
             db.execute(_FLOOR_TABLE)
         if version in (2, 3, 4, 5, 6):
             db.execute("ALTER TABLE places ADD COLUMN background_cross REAL")
+        if version in (2, 3, 4, 5, 6, 7):
+            db.execute(_VIEWS_TABLE)
             db.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'",
                        (str(SCHEMA_VERSION),))
         if version == 1:

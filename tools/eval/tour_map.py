@@ -140,7 +140,7 @@ def mapped_run(args: argparse.Namespace) -> Iterator[tuple[Run, list[Point]]]:
     cfg = lockstep_config(args.seed, world=world_spec, start_pose=world.start_pose,
                           localisation=settings, camera_model=camera_model)
     backends = getattr(args, "backends", "sim")
-    key = f"{world_spec} places={args.places} spacing={args.spacing} speed={args.speed} v2"
+    key = f"{world_spec} places={args.places} spacing={args.spacing} speed={args.speed} v3"
     if backends != "sim":  # a map learned through the ros2 backends is another map
         key += f" backends={backends}"
     if camera_model != "mirror":
