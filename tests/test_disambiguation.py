@@ -16,7 +16,9 @@ from daemon.mapping.lookalikes import likeliest, own_feature, pair_features
 from daemon.store.sqlite_store import MapStore
 from daemon.vision.disambiguation import (
     Feature,
+    PairFeatures,
     best_ncc,
+    can_decide,
     choose,
     decide,
     find_feature,
@@ -140,6 +142,22 @@ def test_the_older_places_feature_is_scored_over_its_learning_views() -> None:
     assert kept.b.own_ncc < 1.0 and _on(kept.b, 500, 56, 32), kept.b
     assert np.array_equal(alone.a.template, kept.a.template)  # A's own: B's views add
     assert kept.a.other_ncc >= alone.a.other_ncc  # places to be ruled out, never fewer
+
+
+def test_features_that_cannot_part_their_places_clearly_are_not_waited_for() -> None:
+    """Two places' scores part by at most half their features' spans together: spans of
+    0.02 (seen as well in the other place) can never clear the evidence bar of 0.07, a
+    good feature beside a useless one can; a negative span counts as none."""
+    t = np.zeros((16, 16), np.uint8)
+
+    def pair(span_a: float, span_b: float) -> PairFeatures:
+        return PairFeatures(1, 2, Feature(0, 0, t, 0.5 + span_a, 0.5),
+                            Feature(0, 0, t, 0.5 + span_b, 0.5))
+
+    assert not can_decide(pair(0.02, 0.02), 0.07)
+    assert not can_decide(pair(0.24, -0.1), 0.13)
+    assert can_decide(pair(0.24, -0.1), 0.11) and can_decide(pair(0.14, 0.02), 0.07)
+    assert can_decide(pair(0.0, 0.0), 0.0)
 
 
 @pytest.mark.parametrize("shift", [0, 37, -150, 355])

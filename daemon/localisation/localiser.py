@@ -59,7 +59,7 @@ from daemon.mapping.acquisition import (
 from daemon.mapping.odometry_chain import OdometryChain
 from daemon.mapping.settings import AcquisitionSettings, OdometryNoiseSettings
 from daemon.mapping.transition import Transition
-from daemon.vision.disambiguation import Feature, choose
+from daemon.vision.disambiguation import Feature, can_decide, choose
 from daemon.vision.floor import FloorModel
 from daemon.vision.local_space import CAP_M, LocalSpace, match_many
 from daemon.vision.recognition import FastMatcher, PreparedPanorama
@@ -436,7 +436,8 @@ class Localiser:
     def _tell_apart(self, grey: np.ndarray, best: int, places: list[int],
                     at_once: bool = False) -> int | None:
         """The search's pick (design §5, thesis §9.5): ``best`` unless places with
-        disambiguating features against it stand within ``ambiguity_margin`` of it. Those
+        disambiguating features against it that can part the two (``can_decide``) stand
+        within ``ambiguity_margin`` of it. Those
         must stay so for ``ambiguity_frames`` frames (None until then: the search goes
         on, its scores may part); then their features decide (``choose``) — overruling
         the lower levels only by ``disambiguation_min_vote``. Features none of which is
@@ -455,7 +456,9 @@ class Localiser:
         top = ranked[best]
         rivals = [p for p, lead in sorted(ranked.items(), key=lambda kv: -kv[1])
                   if p != best and p in places and top - lead <= s.ambiguity_margin]
-        rivals = [p for p in rivals if frozenset((best, p)) in self.map.features][:MAX_RIVALS]
+        rivals = [p for p in rivals if (pair := self.map.features.get(frozenset((best, p))))
+                  is not None and can_decide(pair, s.disambiguation_min_evidence)
+                  ][:MAX_RIVALS]
         if not rivals:
             self.reloc.ambiguous_frames = 0
             return best  # no look-alike of it stands near: nothing for the features to do

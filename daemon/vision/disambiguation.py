@@ -150,6 +150,17 @@ def choose(view: np.ndarray, features: dict[tuple[int, int], Feature]
     return max(scores, key=lambda x: scores[x]), scores, nccs
 
 
+def can_decide(pair: PairFeatures, min_evidence: float) -> bool:
+    """Whether the pair's features can ever part its two places by ``min_evidence``: a
+    place's score in :func:`choose` is a mean of votes within ±span/2 of its features,
+    so two places part by at most (span_a + span_b)/2. Features that score about 0
+    (seen as well in the other place as in their own: aliased-corridor seed 2's first
+    and last places, 0.02 each) can only keep a decision waiting for a clear view that
+    never comes; meanwhile the lower levels' pick, which a tracker would already be
+    holding, goes unused."""
+    return (max(pair.a.score, 0.0) + max(pair.b.score, 0.0)) / 2.0 >= min_evidence
+
+
 def best_ncc(view: np.ndarray, feature: Feature) -> float:
     """The feature's best NCC anywhere in the grey ``view`` (with its wrap margin)."""
     return float(ncc_map(view, feature.template).max())

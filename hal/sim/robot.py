@@ -343,6 +343,14 @@ class SimRobot:
             if waypoint is not None:
                 self._waypoint = waypoint
 
+    def reseed(self, seed: int) -> None:
+        """Draw the odometry's and the camera's noise afresh from ``seed``, as a new robot
+        built with it would: an evaluator running one trial twice (with and without a
+        method's part) gives both runs the same noise, so the difference is the part's."""
+        with self._lock:
+            self._rng = np.random.default_rng([seed, 17])
+            self._camera_rng = np.random.default_rng([seed, 23])
+
     @property
     def waypoint(self) -> int:
         """The scenario autopilot's next waypoint (truth interface)."""
