@@ -440,10 +440,7 @@ def test_the_floor_model_is_kept_with_the_map_and_a_damaged_one_named(tmp_path: 
         floor = store.load().floor
         assert floor is not None and floor.gradient_threshold == 0.3
         assert np.array_equal(floor.colour.histogram, histogram)
-    db = sqlite3.connect(path)
-    db.execute("UPDATE floor SET histogram = ?", (b"short",))
-    db.commit()
-    db.close()
+    _write_behind(path, "UPDATE floor SET histogram = ?", (b"short",))
     with MapStore.open(path, GEOMETRY) as store, pytest.raises(
             MapStoreError, match="floor model is damaged"):
         store.floor()
@@ -500,10 +497,16 @@ def test_version_7_map_gains_the_learning_views_and_a_damaged_one_is_named(
         assert store.views(2) == []
     assert len(kept) == 4 and all(np.array_equal(a, b) for a, b in zip(kept, views,
                                                                        strict=True))
-    db = sqlite3.connect(path)
-    db.execute("UPDATE views SET panorama = ? WHERE place_id = 1 AND k = 2", (b"\x89PNG",))
-    db.commit()
-    db.close()
+    _write_behind(path, "UPDATE views SET panorama = ? WHERE place_id = 1 AND k = 2",
+                  (b"\x89PNG",))
     with MapStore.open(path, GEOMETRY) as store, pytest.raises(
             MapStoreError, match="place 1's learning view 2 is damaged"):
         store.views(1)
+
+
+def _write_behind(path: Path, statement: str, args: tuple[Any, ...] = ()) -> None:
+    """Change the map file behind placecell's back (damage, as a disk or a person would)."""
+    db = sqlite3.connect(path)
+    db.execute(statement, args)
+    db.commit()
+    db.close()
