@@ -71,8 +71,7 @@ class SimRobot:
         self._lock = threading.RLock()
         self._dt_ns = int(round(1e9 / base.odometry_rate_hz))
         self._frame_ns = int(round(1e9 / camera.rate_hz))
-        self._rng = np.random.default_rng([seed, 17])
-        self._camera_rng = np.random.default_rng([seed, 23])
+        self.reseed(seed)
         self._t_ns = 0  # simulated time since start
         self._mono0 = time.monotonic_ns()
         self._pose = start_pose  # true pose, world frame

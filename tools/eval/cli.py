@@ -111,11 +111,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         print(json.dumps(out, indent=2, sort_keys=True))
     elif args.seeds:
-        per_seed = result["per_seed"]
-        columns = getattr(module, "SEED_COLUMNS", None) or [
-            k for k, v in next(iter(per_seed.values())).items()
-            if isinstance(v, int | float) and not isinstance(v, bool)]
-        print(table(per_seed, list(columns)))
+        columns = getattr(module, "SEED_COLUMNS", None)
+        print(table(result["per_seed"], None if columns is None else list(columns)))
     else:
         for key, value in out["metrics"].items():
             print(f"{key:32s} {value}")

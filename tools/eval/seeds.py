@@ -18,7 +18,7 @@ import importlib
 import math
 import multiprocessing
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeGuard
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -73,12 +73,10 @@ def run_seeds(module_name: str, args: argparse.Namespace, seeds: list[int], jobs
 def summarise(per_seed: dict[int, dict[str, Any]]) -> dict[str, float]:
     """Mean, minimum and maximum of each numeric metric over the seeds (a seed whose
     metric is None, as a decision rate with no decision, does not count)."""
-    names = [k for k in next(iter(per_seed.values()))]
     out: dict[str, float] = {}
-    for name in names:
-        values = [m.get(name) for m in per_seed.values()]
-        numbers = [float(v) for v in values if isinstance(v, int | float)
-                   and not isinstance(v, bool) and math.isfinite(v)]
+    for name in next(iter(per_seed.values())):
+        numbers = [float(v) for m in per_seed.values() if _is_number(v := m.get(name))
+                   and math.isfinite(v)]
         if not numbers:
             continue
         out[f"{name}_mean"] = round(sum(numbers) / len(numbers), 4)
@@ -87,8 +85,11 @@ def summarise(per_seed: dict[int, dict[str, Any]]) -> dict[str, float]:
     return out
 
 
-def table(per_seed: dict[int, dict[str, Any]], columns: list[str]) -> str:
-    """The per-seed table of ``columns`` with mean, min and max rows (text output)."""
+def table(per_seed: dict[int, dict[str, Any]], columns: list[str] | None = None) -> str:
+    """The per-seed table of ``columns`` (default: every numeric metric) with mean, min
+    and max rows (text output)."""
+    if columns is None:
+        columns = [k for k, v in next(iter(per_seed.values())).items() if _is_number(v)]
     summary = summarise(per_seed)
     width = [max(len(c), 7) for c in columns]
 
@@ -107,3 +108,7 @@ def table(per_seed: dict[int, dict[str, Any]], columns: list[str]) -> str:
         lines.append(f"{row:<4s}  " + "  ".join(cell(summary.get(f"{c}_{row}"), w)
                                                 for c, w in zip(columns, width, strict=True)))
     return "\n".join(lines)
+
+
+def _is_number(value: Any) -> TypeGuard[int | float]:
+    return isinstance(value, int | float) and not isinstance(value, bool)
