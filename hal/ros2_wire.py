@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import math
+import threading
 import time
 from typing import Any
 
@@ -147,10 +148,40 @@ def ros_time(stamp_ns: int) -> Any:
                                                          nanosec=stamp_ns % 1_000_000_000)
 
 
+class _ClockOffset:
+    """The UNIX clock minus the monotonic clock (ns), read between two monotonic reads
+    so a thread pre-empted between the reads (a busy machine: tens of ms) never skews
+    a stamp: such a reading is passed over and the last clean one kept."""
+
+    CLEAN_NS = 200_000  # the two monotonic reads within 0.2 ms: the reading is clean
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._offset_ns: int | None = None
+
+    def now(self) -> int:
+        for _ in range(3):
+            before = time.monotonic_ns()
+            unix = time.time_ns()
+            after = time.monotonic_ns()
+            if after - before <= self.CLEAN_NS:
+                offset = unix - (before + after) // 2
+                with self._lock:
+                    self._offset_ns = offset
+                return offset
+        with self._lock:
+            if self._offset_ns is not None:
+                return self._offset_ns
+        return unix - (before + after) // 2  # never clean yet: the best there is
+
+
+_CLOCK_OFFSET = _ClockOffset()
+
+
 def monotonic_of(ros_stamp_ns: int) -> int:
     """A ROS stamp (ns since the UNIX epoch) on the monotonic clock the daemon stamps
     with, by the offset of the two clocks now: a robot's stamps keep their spacing."""
-    return ros_stamp_ns - (time.time_ns() - time.monotonic_ns())
+    return ros_stamp_ns - _CLOCK_OFFSET.now()
 
 
 def stamp_of(ros_time_msg: Any) -> int:

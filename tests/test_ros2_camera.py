@@ -156,3 +156,29 @@ def test_frames_arrive_over_rmw_zenoh_keys_stamped_on_the_monotonic_clock() -> N
         driver.close()
     with pytest.raises(DeviceTimeoutError, match="no image on ROS 2 topic"):
         camera.read(0.01)
+
+
+def test_a_stamp_conversion_preempted_between_clock_reads_is_not_skewed(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """ROS stamps go onto the monotonic clock by the offset of the two clocks; a thread
+    pre-empted between reading them (50 ms here) would shift a frame's stamp by that
+    much against its odometry: such a reading is passed over."""
+    from hal import ros2_wire
+    offset = ros2_wire._ClockOffset()
+    monotonic, unix = [1_000_000_000], 5_000_000_000_000
+
+    def mono() -> int:
+        monotonic[0] += 1000
+        return monotonic[0]
+
+    monkeypatch.setattr(ros2_wire.time, "monotonic_ns", mono)
+    monkeypatch.setattr(ros2_wire.time, "time_ns", lambda: unix + monotonic[0])
+    clean = offset.now()
+    assert abs(clean - unix) <= 1000
+
+    def preempted() -> int:  # every read: 50 ms passed since the one before
+        monotonic[0] += 50_000_000
+        return monotonic[0]
+
+    monkeypatch.setattr(ros2_wire.time, "monotonic_ns", preempted)
+    assert offset.now() == clean

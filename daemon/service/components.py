@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import threading
-import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -133,6 +132,7 @@ class ProcessingComponent:
     and every odometry sample also goes to the taps (the mapper, a running job)."""
 
     name = "processing"
+    LOCKSTEP_ODOMETRY_S = 1.0  # replay: how long a frame waits for its odometry
 
     def __init__(self, make_localiser: Callable[[], Localiser], mailbox: LatestFrame,
                  odometry_inbox: OdometryInbox,
@@ -158,8 +158,7 @@ class ProcessingComponent:
         frame = self._mailbox.take(timeout=0.2)
         if frame is None:
             return
-        if self._mailbox.lockstep:  # replay: the odometry up to the frame first
-            self._await_odometry(frame.stamp_ns)
+        self._await_odometry(frame.stamp_ns)
         for frame_tap in self._frame_taps:
             frame_tap(frame)
         belief, updates = self.localiser.process_frame(frame)
@@ -168,16 +167,26 @@ class ProcessingComponent:
         self._health().detail["skipped_frames"] = self._mailbox.skipped
         self._on_belief(belief, updates)
 
-    def _await_odometry(self, stamp_ns: int, timeout_s: float = 1.0) -> None:
-        """Wait until odometry reaches the frame's stamp (or ``timeout_s`` passes: a base
-        that stopped is then reported as missing odometry, as always)."""
+    def _await_odometry(self, stamp_ns: int) -> None:
+        """Wait (on the inbox's event) until odometry reaches the frame's stamp, so the
+        localiser interpolates the pose at the frame instead of taking a sample from
+        before it (a base's samples often arrive a few tens of ms after the frame taken
+        beside them; under load, more) — as AMCL's message filter holds a scan until the
+        transform at its stamp is there. Only while odometry flows (its newest sample
+        within ``Localiser.ODOMETRY_STALE_NS`` of the frame) and for at most that long: a
+        base that stopped is reported as missing odometry, as always, without slowing
+        the frames. A replayed recording (lockstep) waits up to ``LOCKSTEP_ODOMETRY_S``."""
         assert self.localiser is not None
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            latest = self.localiser.odometry.latest
-            if latest is not None and latest.stamp_ns >= stamp_ns:
-                return
-            time.sleep(0.002)
+        stale_ns = self.localiser.ODOMETRY_STALE_NS
+        latest = self.localiser.odometry.latest
+        if self._mailbox.lockstep:
+            timeout_s = self.LOCKSTEP_ODOMETRY_S
+        elif latest is None or stamp_ns - latest.stamp_ns > stale_ns:
+            return
+        else:
+            timeout_s = stale_ns / 1e9
+        if latest is None or latest.stamp_ns < stamp_ns:
+            self._odometry.wait_until(stamp_ns, timeout_s)
             self._hand_over_odometry()
 
     def _hand_over_odometry(self) -> None:
@@ -196,17 +205,30 @@ class OdometryInbox:
     """Thread-safe hand-over of odometry samples from the base thread to processing."""
 
     def __init__(self) -> None:
-        self._lock = threading.Lock()
+        self._cond = threading.Condition()
         self._samples: list[Odometry] = []
+        self._newest_ns: int | None = None  # the newest stamp ever put
 
     def put(self, samples: list[Odometry]) -> None:
-        with self._lock:
+        with self._cond:
             self._samples.extend(samples)
+            for sample in samples:
+                if self._newest_ns is None or sample.stamp_ns > self._newest_ns:
+                    self._newest_ns = sample.stamp_ns
+            self._cond.notify_all()
 
     def drain(self) -> list[Odometry]:
-        with self._lock:
+        with self._cond:
             out, self._samples = self._samples, []
             return out
+
+    def wait_until(self, stamp_ns: int, timeout_s: float) -> bool:
+        """Wait until a sample stamped at or after ``stamp_ns`` has been put (True), or
+        ``timeout_s`` passed (False)."""
+        with self._cond:
+            return self._cond.wait_for(
+                lambda: self._newest_ns is not None and self._newest_ns >= stamp_ns,
+                timeout_s)
 
 
 def _info(device: Any) -> dict[str, Any]:
