@@ -15,13 +15,14 @@ Metrics: ``mean_error_m``, ``p95_error_m``, ``final_error_m`` (over the laps aft
 mapping lap), ``odometry_final_error_m`` (dead reckoning over those laps),
 ``last_lap_over_first`` (mean error of the last lap over the first's), ``cycle_error_m``
 and ``cycle_error_deg`` (the closing transition measured by the localiser against the
-truth), ``loop_sum_error_m`` and ``loop_sum_error_deg`` (the same transition as the sum
-of the odometry transitions round the loop), ``cycles_closed``, ``place_switches``,
-``process_ms_median``; the one ``map`` frame (design §6, daemon/mapping/embedding.py) the
-finished map embeds in: ``embedded_max_error_m`` and ``embedded_mean_error_m`` (each
-place's optimised position relative to the first place against its true one) and
-``map_error_m_mean`` / ``map_error_m_p95`` (the lap poses composed into that frame
-against the truth relative to the first place).
+truth), ``loop_sum_error_m`` and ``loop_sum_error_deg`` (the same transition as the sum of
+the odometry transitions round the loop; None when ``transitions_missing`` says the
+mapping lap left consecutive places unjoined, a loss between them), ``cycles_closed``,
+``place_switches``, ``process_ms_median``; the one ``map`` frame (design §6,
+daemon/mapping/embedding.py) the finished map embeds in: ``embedded_max_error_m`` and
+``embedded_mean_error_m`` (each place's optimised position relative to the first place
+against its true one) and ``map_error_m_mean`` / ``map_error_m_p95`` (the lap poses
+composed into that frame against the truth relative to the first place).
 """
 
 from __future__ import annotations
@@ -165,10 +166,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         ids = sorted(r.references)
         last, first_id = ids[-1], ids[0]
         truth_cycle = r.references[last].between(r.references[first_id])
-        loop_sum = SE2()
+        loop_sum: SE2 | None = SE2()
+        missing = 0  # consecutive places the mapping lap left without a transition
         for a, b in zip(ids[::-1], ids[::-1][1:], strict=False):  # last -> ... -> first
             t = r.mapper.graph.transition(a, b)
-            loop_sum = loop_sum.compose(t.T_from_to.mean) if t is not None else loop_sum
+            missing += t is None
+            loop_sum = None if t is None or loop_sum is None \
+                else loop_sum.compose(t.T_from_to.mean)
         cycle = next((t for t in closed if {t.from_id, t.to_id} == {last, first_id}), None)
         process_ms = float(np.median(r.process_s)) * 1e3
         # The map frame the finished map embeds in, anchored at the first place.
@@ -208,10 +212,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 math.hypot(cycle_se2.x - truth_cycle.x, cycle_se2.y - truth_cycle.y), 4),
             "cycle_error_deg": None if cycle_se2 is None else round(abs(math.degrees(
                 math.remainder(cycle_se2.yaw - truth_cycle.yaw, 2 * math.pi))), 3),
-            "loop_sum_error_m": round(math.hypot(loop_sum.x - truth_cycle.x,
-                                                 loop_sum.y - truth_cycle.y), 4),
-            "loop_sum_error_deg": round(abs(math.degrees(math.remainder(
-                loop_sum.yaw - truth_cycle.yaw, 2 * math.pi))), 3),
+            "loop_sum_error_m": None if loop_sum is None else round(
+                math.hypot(loop_sum.x - truth_cycle.x, loop_sum.y - truth_cycle.y), 4),
+            "loop_sum_error_deg": None if loop_sum is None else round(abs(math.degrees(
+                math.remainder(loop_sum.yaw - truth_cycle.yaw, 2 * math.pi))), 3),
+            "transitions_missing": missing,
             "embedded_max_error_m": round(max(placed), 4),
             "embedded_mean_error_m": round(float(np.mean(placed)), 4),
             "map_error_m_mean": round(float(np.mean(in_map)), 4),
