@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import math
 from collections.abc import Iterator
 from pathlib import Path
@@ -166,13 +167,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         ids = sorted(r.references)
         last, first_id = ids[-1], ids[0]
         truth_cycle = r.references[last].between(r.references[first_id])
-        loop_sum: SE2 | None = SE2()
-        missing = 0  # consecutive places the mapping lap left without a transition
-        for a, b in zip(ids[::-1], ids[::-1][1:], strict=False):  # last -> ... -> first
-            t = r.mapper.graph.transition(a, b)
-            missing += t is None
-            loop_sum = None if t is None or loop_sum is None \
-                else loop_sum.compose(t.T_from_to.mean)
+        steps = [r.mapper.graph.transition(a, b)  # last -> ... -> first
+                 for a, b in zip(ids[::-1], ids[::-1][1:], strict=False)]
+        missing = sum(t is None for t in steps)  # places the mapping lap left unjoined
+        loop_sum = None if missing else functools.reduce(
+            SE2.compose, [t.T_from_to.mean for t in steps if t is not None], SE2())
         cycle = next((t for t in closed if {t.from_id, t.to_id} == {last, first_id}), None)
         process_ms = float(np.median(r.process_s)) * 1e3
         # The map frame the finished map embeds in, anchored at the first place.
@@ -187,6 +186,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     all_errors = np.concatenate([np.array(e) for e in laps])
     cycle_se2 = None if cycle is None else (cycle.T_from_to.mean if cycle.from_id == last
                                             else cycle.T_from_to.mean.inverse())
+    cycle_m, cycle_deg = _error(cycle_se2, truth_cycle)
+    loop_sum_m, loop_sum_deg = _error(loop_sum, truth_cycle)
     if args.plots:
         out = Path(args.plots)
         plots.paths(out / "cyclic-path.png", {k: np.array(v) for k, v in paths.items()},
@@ -208,14 +209,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             "odometry_final_error_m": round(math.hypot(odo_move.x - true_move.x,
                                                        odo_move.y - true_move.y), 4),
             "last_lap_over_first": round(float(np.mean(laps[-1]) / np.mean(laps[0])), 3),
-            "cycle_error_m": None if cycle_se2 is None else round(
-                math.hypot(cycle_se2.x - truth_cycle.x, cycle_se2.y - truth_cycle.y), 4),
-            "cycle_error_deg": None if cycle_se2 is None else round(abs(math.degrees(
-                math.remainder(cycle_se2.yaw - truth_cycle.yaw, 2 * math.pi))), 3),
-            "loop_sum_error_m": None if loop_sum is None else round(
-                math.hypot(loop_sum.x - truth_cycle.x, loop_sum.y - truth_cycle.y), 4),
-            "loop_sum_error_deg": None if loop_sum is None else round(abs(math.degrees(
-                math.remainder(loop_sum.yaw - truth_cycle.yaw, 2 * math.pi))), 3),
+            "cycle_error_m": cycle_m,
+            "cycle_error_deg": cycle_deg,
+            "loop_sum_error_m": loop_sum_m,
+            "loop_sum_error_deg": loop_sum_deg,
             "transitions_missing": missing,
             "embedded_max_error_m": round(max(placed), 4),
             "embedded_mean_error_m": round(float(np.mean(placed)), 4),
@@ -227,3 +224,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             "process_ms_median": round(process_ms, 2),
         },
     }
+
+
+def _error(measured: SE2 | None, truth: SE2) -> tuple[float | None, float | None]:
+    """(metres, degrees) between a measured transition and the true one; None, None when
+    there is no measurement."""
+    if measured is None:
+        return None, None
+    return (round(math.hypot(measured.x - truth.x, measured.y - truth.y), 4),
+            round(abs(math.degrees(math.remainder(measured.yaw - truth.yaw, 2 * math.pi))), 3))
