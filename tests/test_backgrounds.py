@@ -116,3 +116,34 @@ def test_a_new_view_is_added_to_the_means_it_joins_and_a_full_set_is_left_alone(
             expected = np.mean([matcher.lrp(views[q], templates)
                                 for q in views_of(pid, ids, limit=2)])
             assert store.load().place(pid).background_cross == pytest.approx(expected)
+
+
+def test_an_lrp_in_another_places_view_is_measured_once_and_the_memo_is_bounded(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Mapper.lrps_in_view gives what the matcher gives, reads a view's panorama only
+    for what it has not measured (a learn asks for its own landmarks in its cross
+    background's views and again in its look-alike candidates'), and keeps LRPS_KEPT."""
+    import daemon.service.mapper as mapper_module
+
+    rng = np.random.default_rng(8)
+    places = [synthetic_place(rng, label) for label in "abcd"]
+    with MapStore.open(tmp_path / "map.db", "abc123") as store:
+        ids = [store.add_place(place).id for place in places]
+        Mapper(store, OdometryNoiseSettings())  # measures and stores the cross backgrounds
+        mapper = Mapper(store, OdometryNoiseSettings())  # so this one has measured nothing
+        monkeypatch.setattr(mapper_module, "LRPS_KEPT", 3)
+        prepared: list[int] = []
+        real_of = PreparedPanorama.of
+        monkeypatch.setattr(mapper_module.PreparedPanorama, "of",
+                            lambda grey: prepared.append(1) or real_of(grey))
+        view = PreparedPanorama.of(to_grey(store.reference_panorama(ids[0])))
+        prepared.clear()
+        expected = [FastMatcher().lrp(view, PreparedTemplates.of(p.landmarks.templates()))
+                    for p in places[1:3]]
+        assert mapper.lrps_in_view(ids[0], ids[1:3]) == pytest.approx(expected)
+        assert prepared == [1]
+        assert mapper.lrps_in_view(ids[0], ids[1:3][::-1]) == pytest.approx(expected[::-1])
+        assert prepared == [1]  # both measured before: the panorama is not read again
+        mapper.lrps_in_view(ids[1], [ids[2], ids[3]])  # two more: the one used least goes
+        assert mapper.lrps_in_view(ids[0], [ids[2]]) == pytest.approx(expected[1:])
+        assert prepared == [1, 1, 1]

@@ -298,3 +298,28 @@ def test_a_prepared_image_gives_opencvs_best_ncc_flat_parts_and_templates_includ
                                    - float(ncc_map(image, template).max())))
     assert worst < 1e-4
     assert prepared.best_ncc(np.full((16, 16), 9, np.uint8)) == 1.0  # OpenCV's flat rule
+
+
+def test_the_ncc_near_a_coarse_peak_is_one_the_template_has_and_finds_a_cut_patch() -> None:
+    """PreparedImage.ncc_near_coarse_peak (the feature search's pruning, design §5) is an
+    NCC the template has somewhere in the image, so never above best_ncc; a patch cut from
+    the image is found where it was cut (NCC 1)."""
+    import cv2
+
+    rng = np.random.default_rng(12)
+    found, above = 0, 0.0
+    for k in range(20):
+        image = cv2.GaussianBlur(rng.integers(0, 256, (120, 752)).astype(np.uint8), (5, 5),
+                                 1.0 + k % 3)
+        prepared = PreparedImage(image)
+        for size in (16, 24, 32):
+            r, c = int(rng.integers(0, 120 - size)), int(rng.integers(0, 752 - size))
+            cut = np.ascontiguousarray(image[r:r + size, c:c + size])
+            other = rng.integers(0, 256, (size, size)).astype(np.uint8)
+            for template in (cut, other):
+                above = max(above, prepared.ncc_near_coarse_peak(template)
+                            - prepared.best_ncc(template))
+            found += prepared.ncc_near_coarse_peak(cut) > 0.9999
+    assert above < 1e-5
+    assert found == 60
+    assert prepared.ncc_near_coarse_peak(np.full((16, 16), 9, np.uint8)) == 1.0

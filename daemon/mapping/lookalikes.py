@@ -33,7 +33,8 @@ class MappedPlace:
 
     templates: PreparedTemplates
     background: float  # LRP
-    reference: np.ndarray  # grey reference panorama with its wrap margin
+    lrp_at_home: float  # its landmarks' LRP in its own reference view
+    new_lrp_at_home: float  # the new place's landmarks' LRP there
 
 
 def likeliest(views: list[np.ndarray], margin: int, signatures: dict[int, np.ndarray | None],
@@ -71,8 +72,7 @@ def lookalikes(views: list[np.ndarray], own: PreparedTemplates, own_background: 
                                                              for i in ids])
     gap = leads[0] - leads[1:]  # how far each old place stands below the new one here
     for k, i in enumerate(ids):  # and the new one below the old one in the old one's view
-        theirs, mine = matcher.lrps(PreparedPanorama.of(others[i].reference),
-                                    [others[i].templates, own])
+        theirs, mine = others[i].lrp_at_home, others[i].new_lrp_at_home
         gap[k] = min(gap[k], (theirs - others[i].background) - (mine - own_background))
     order = np.argsort(gap)
     return [ids[k] for k in order[:limit] if gap[k] <= margin]

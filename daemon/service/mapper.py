@@ -70,6 +70,9 @@ CLOSING_MAX_M = 2.0
 # Grey reference panoramas kept decoded (90 kB each at 752 x 120): every learn reads the
 # first CROSS_VIEWS places' (its cross background) and its look-alike candidates'.
 REFERENCES_KEPT = 128
+# LRPs of one place's landmarks in another's reference view kept (a learn reads up to 200:
+# its own in its cross background's views and its candidates', each candidate's in its own).
+LRPS_KEPT = 4096
 
 
 def _closing(seen: Seen) -> list[Link]:
@@ -87,6 +90,8 @@ class Mapper:
         self._lock = threading.RLock()
         self._references: collections.OrderedDict[int, np.ndarray] = \
             collections.OrderedDict()  # grey, by place id, the last used last
+        self._lrps: collections.OrderedDict[tuple[int, int], float] = \
+            collections.OrderedDict()  # (landmarks' place, view's place) → LRP, as above
         self.graph: TopologicalMap = store.load()
         # Each place's segment (design §6), replaced whole on every change of the map.
         self.segment_of: dict[int, int] = self.graph.segments()
@@ -241,12 +246,8 @@ class Mapper:
         reference panorama."""
         if not grown:
             return []
-        with self._lock:
-            templates = [PreparedTemplates.of(self.graph.place(q).landmarks.templates())
-                         for q in grown]
-        pano = PreparedPanorama.of(self.grey_reference(view))
         values = {q: (mean * n + lrp) / (n + 1) for (q, (mean, n)), lrp in zip(
-            grown.items(), FastMatcher().lrps(pano, templates), strict=True)}
+            grown.items(), self.lrps_in_view(view, list(grown)), strict=True)}
         return self._keep_cross_backgrounds(values)
 
     def _store_cross_backgrounds(self, place_ids: list[int]) -> list[Place]:
@@ -258,15 +259,37 @@ class Mapper:
                          for q in place_ids}
         views = {q: views_of(q, ids) for q in place_ids}
         sums = dict.fromkeys(place_ids, 0.0)
-        matcher = FastMatcher()
         for v in sorted({v for vs in views.values() for v in vs}):
             users = [q for q in place_ids if v in views[q]]
-            pano = PreparedPanorama.of(self.grey_reference(v))
-            for q, lrp in zip(users, matcher.lrps(pano, [templates[q] for q in users]),
-                              strict=True):
+            for q, lrp in zip(users, self.lrps_in_view(v, users, templates), strict=True):
                 sums[q] += lrp
         return self._keep_cross_backgrounds(
             {q: sums[q] / len(views[q]) for q in place_ids if views[q]})
+
+    def lrps_in_view(self, view: int, place_ids: list[int],
+                     prepared: dict[int, PreparedTemplates] | None = None) -> list[float]:
+        """The LRP of each place's landmarks in place ``view``'s reference panorama, each
+        measured once while among the LRPS_KEPT used last (neither ever changes): a learn
+        asks for its own landmarks in its cross background's views and again in its
+        look-alike candidates' (the same places until the map passes CROSS_VIEWS), and
+        for each candidate's in its own view at every learn it is a candidate in.
+        ``prepared``: the places' templates, if the caller has them prepared."""
+        with self._lock:
+            known = {q: self._lrps[(q, view)] for q in place_ids if (q, view) in self._lrps}
+            missing = [q for q in place_ids if q not in known]
+            given = prepared or {}
+            templates = [given[q] if q in given else PreparedTemplates.of(
+                self.graph.place(q).landmarks.templates()) for q in missing]
+        if missing:
+            pano = PreparedPanorama.of(self.grey_reference(view))
+            known.update(zip(missing, FastMatcher().lrps(pano, templates), strict=True))
+        with self._lock:
+            for q in place_ids:
+                self._lrps[(q, view)] = known[q]
+                self._lrps.move_to_end((q, view))
+            while len(self._lrps) > LRPS_KEPT:
+                self._lrps.popitem(last=False)
+        return [known[q] for q in place_ids]
 
     def _keep_cross_backgrounds(self, values: dict[int, float]) -> list[Place]:
         with self._lock:
@@ -303,7 +326,7 @@ class Mapper:
                 if pid in self.graph]
         others = {p.id: MappedPlace(PreparedTemplates.of(p.landmarks.templates()),
                                     _background(p, settings.background_lrp),
-                                    self.grey_reference(p.id))
+                                    *self.lrps_in_view(p.id, [p.id, place_id]))
                   for p in candidates}
         found = lookalikes(own_views, PreparedTemplates.of(place.landmarks.templates()),
                            _background(place, settings.background_lrp), others,
@@ -311,7 +334,7 @@ class Mapper:
                            settings.max_lookalikes)
         self.store.put_views(place_id, views)
         pairs = pair_features(place_id, own_views,
-                              {o: [others[o].reference, *self.store.views(o)] for o in found},
+                              {o: [self.grey_reference(o), *self.store.views(o)] for o in found},
                               margin)
         for pair in pairs:
             with self._lock:

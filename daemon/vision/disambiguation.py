@@ -24,6 +24,7 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+import cv2
 import numpy as np
 
 from daemon.vision.ncc import PreparedImage, ncc_map
@@ -100,6 +101,10 @@ def find_feature(own: list[np.ndarray], other: list[np.ndarray], margin: int) ->
             own_ncc = min((_near(v, margin, template, col, row) for v in own[1:]),
                           default=1.0)
             out_at = math.inf if best is None else own_ncc - best.score
+            # A match found near each view's coarse peak is one the patch has there, so
+            # at least that good anywhere: most candidates are out on that alone.
+            if any(v.ncc_near_coarse_peak(template) >= out_at for v in others):
+                continue
             other_ncc = -1.0
             for v in others:
                 other_ncc = max(other_ncc, v.best_ncc(template))
@@ -180,8 +185,20 @@ def _textured_candidates(core: np.ndarray, size: int) -> list[tuple[int, int]]:
     h, w = core.shape
     spots = [(c, r) for r in range(0, h - size + 1, GRID_STEP)
              for c in range(0, w - size + 1, GRID_STEP)]
-    stds = np.array([float(core[r:r + size, c:c + size].std()) for c, r in spots])
-    order = np.argsort(-stds)
+    if not spots:
+        return []
+    # Each patch's standard deviation from the image's integrals of I and I²: sqrt(E[I²] − E[I]²)
+    s1, s2 = cv2.integral2(core, sdepth=cv2.CV_64F)
+    rows = np.array([r for _, r in spots])
+    cols = np.array([c for c, _ in spots])
+
+    def total(s: np.ndarray) -> np.ndarray:
+        return (s[rows + size, cols + size] - s[rows, cols + size] - s[rows + size, cols]
+                + s[rows, cols])
+
+    n = float(size * size)
+    stds = np.sqrt(np.maximum(total(s2) / n - (total(s1) / n) ** 2, 0.0))
+    order = np.argsort(-stds, kind="stable")
     return [spots[i] for i in order[:CANDIDATES_PER_SIZE] if stds[i] >= MIN_STD]
 
 
