@@ -9,7 +9,6 @@ import math
 import struct
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -384,17 +383,18 @@ def _amcl_services(session: zenoh.Session, pose_request: bytes, poses: list[dict
                            target=zenoh.QueryTarget.ALL_COMPLETE, timeout=10.0))
     assert len(bad) == 1 and bad[0].err is not None, bad
     assert "no attachment" in bad[0].err.payload.to_string(), bad[0].err.payload.to_string()
-    called_ns = time.monotonic_ns()
+    seen_poses, seen_events = len(poses), len(events)  # what came before the call
     assert _call(session, "reinitialize_global_localization", "std_srvs::srv::dds_::Empty_",
                  EMPTY_HASH, EMPTY_CDR, 42) == EMPTY_CDR
-    # The global search it starts: a pose relocalising, or — when the frame under way at
-    # the call was the search's first and the next one already confirmed the place (a
-    # fresh-clone run: "relocalised", global, 1 frame) — its relocalised event, both from
-    # frames captured after the call.
-    assert wait_for(lambda: any(p["state"] == "relocalising" and p["stamp_ns"] > called_ns
-                                for p in poses) or any(
-        e["event"] == "relocalised" and e["how"] == "global" and e["stamp_ns"] > called_ns
-        for e in events), 30), (poses[-1:], events[-3:])
+    # The global search it starts, heard after the call: a pose relocalising, or its
+    # relocalised event (global). By arrival, not by frame stamp: on a busy machine the
+    # frames the search runs on, start and confirmation alike, may have been captured
+    # before the call and processed after it (a fresh-clone run: no pose or event
+    # stamped after the call for 30 s). Before the call the pose was set and tracked
+    # (set_initial_pose, confirmed by the operator), so only the search relocalises.
+    assert wait_for(lambda: any(p["state"] == "relocalising" for p in poses[seen_poses:])
+                    or any(e["event"] == "relocalised" and e["how"] == "global"
+                           for e in events[seen_events:]), 30), (poses[-1:], events[-3:])
 
 
 @pytest.mark.timeout(240)
