@@ -5,9 +5,11 @@ place of the map, joined to that place too (a cycle closed where the robot came 
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from daemon.mapping.settings import OdometryNoiseSettings
 from daemon.service.mapper import Mapper
@@ -72,3 +74,21 @@ def test_a_place_learned_where_another_is_tracked_is_joined_to_both(tmp_path: Pa
         # Tracked 2.5 m from place 1's reference: too far out to trust for a link.
         far = UncertainSE2(SE2(2.5, 0.0, 0.0), np.diag([0.03, 0.03, 0.02]) ** 2)
         assert [link.from_id for link in mapper.begin_place(there, (1, far))] == [stored.id]
+
+
+def test_a_place_that_neither_odometry_nor_an_estimate_joins_is_said_so(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """Odometry from the last place broken (a gap over [odometry] max_gap_s) and no
+    reliable estimate: the place gets no link, and the log says why (cyclic on the ros2
+    backends learned such a place; notes of 2026-12-06)."""
+    with MapStore.open(tmp_path / "map.db", "abc123") as store:
+        mapper = Mapper(store, OdometryNoiseSettings(max_gap_s=1.0))
+        here = _driven(mapper, 1.0)
+        with caplog.at_level(logging.WARNING, logger="daemon.service.mapper"):
+            assert [link.source for link in mapper.begin_place(here)] == ["odometry"]
+            assert not caplog.records  # joined: nothing to say
+            later = Odometry(1.0, 0.0, 0.0, here.stamp_ns + 1_500_000_000, 500)
+            mapper.on_odometry([later])  # 1.5 s without a sample
+            assert mapper.begin_place(later) == []
+        assert "no transition from place 1" in caplog.text
+        assert "max_gap_s" in caplog.text

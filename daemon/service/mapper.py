@@ -170,6 +170,13 @@ class Mapper:
             odometry = None if chain is None or last is None or chain.broken \
                 or last not in self.graph else Link(last, chain.relative_at(reference))
             if seen is None or seen[0] not in self.graph:
+                if odometry is None and last is not None and last in self.graph:
+                    # Joined to the map only when a cycle is later closed to it; the
+                    # localiser reaches it meanwhile as it reaches an unjoined place.
+                    log.warning("place being learned: no transition from place %d (%s) and "
+                                "no reliable estimate to join it by", last,
+                                "odometry broke: a gap over [odometry] max_gap_s"
+                                if chain is not None and chain.broken else "no odometry run")
                 return [] if odometry is None else [odometry]
             if odometry is None:
                 return [Link(seen[0], seen[1], "vision")]
