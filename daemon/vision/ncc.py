@@ -91,7 +91,7 @@ class PreparedImage:
     def ncc_near_coarse_peak(self, template: np.ndarray) -> float:
         """The template's NCC where a half-resolution search puts its best match (the
         best of the HINT_REACH x HINT_REACH positions there): one the template has in
-        this image, so never above :meth:`best_ncc`, and about a sixth of its cost. A
+        this image, so never above :meth:`best_ncc`, at a fraction of its cost. A
         search that only needs to know that a template matches at least so well
         somewhere (the feature search's exact pruning, design §5) asks this first."""
         t, t_norm = _zero_mean(template)
@@ -124,7 +124,8 @@ class PreparedImage:
         return inverse
 
 
-HINT_REACH = 5  # positions each way round a coarse peak (a half-resolution pixel is two)
+HINT_REACH = 5  # side of the square of positions tried round a coarse peak (one coarse
+# pixel is two full-resolution ones, so the peak's full-resolution place is within it)
 
 
 def _zero_mean(template: np.ndarray) -> tuple[np.ndarray, float]:
