@@ -24,10 +24,9 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
-import cv2
 import numpy as np
 
-from daemon.vision.ncc import PreparedImage, ncc_map
+from daemon.vision.ncc import PreparedImage, ncc_map, window_norms
 from kernel.panorama import core_of
 
 SIZES = (16, 24, 32)  # square template sides, pixels
@@ -187,17 +186,8 @@ def _textured_candidates(core: np.ndarray, size: int) -> list[tuple[int, int]]:
              for c in range(0, w - size + 1, GRID_STEP)]
     if not spots:
         return []
-    # Each patch's standard deviation from the image's integrals of I and I²: sqrt(E[I²] − E[I]²)
-    s1, s2 = cv2.integral2(core, sdepth=cv2.CV_64F)
-    rows = np.array([r for _, r in spots])
-    cols = np.array([c for c, _ in spots])
-
-    def total(s: np.ndarray) -> np.ndarray:
-        return (s[rows + size, cols + size] - s[rows, cols + size] - s[rows + size, cols]
-                + s[rows, cols])
-
-    n = float(size * size)
-    stds = np.sqrt(np.maximum(total(s2) / n - (total(s1) / n) ** 2, 0.0))
+    norms = window_norms(core, size)  # sqrt(Σ I² − (Σ I)² / n): the std times the side
+    stds = np.array([norms[r, c] for c, r in spots], dtype=np.float64) / size
     order = np.argsort(-stds, kind="stable")
     return [spots[i] for i in order[:CANDIDATES_PER_SIZE] if stds[i] >= MIN_STD]
 
