@@ -331,11 +331,12 @@ class Mapper:
             candidates = [self.graph.place(pid) for pid in likeliest(
                 own_views, margin, signatures, settings.lookalike_candidates)
                 if pid in self.graph]
-        others = {p.id: MappedPlace(PreparedTemplates.of(p.landmarks.templates()),
-                                    _background(p, settings.background_lrp),
-                                    *self.lrps_in_view(p.id, [p.id, place_id]))
+        prepared = {p.id: PreparedTemplates.of(p.landmarks.templates())
+                    for p in [place, *candidates]}  # each once, for the LRPs and the test
+        others = {p.id: MappedPlace(prepared[p.id], _background(p, settings.background_lrp),
+                                    *self.lrps_in_view(p.id, [p.id, place_id], prepared))
                   for p in candidates}
-        found = lookalikes(own_views, PreparedTemplates.of(place.landmarks.templates()),
+        found = lookalikes(own_views, prepared[place_id],
                            _background(place, settings.background_lrp), others,
                            settings.lookalike_margin,
                            settings.max_lookalikes)
