@@ -92,3 +92,39 @@ def test_a_place_that_neither_odometry_nor_an_estimate_joins_is_said_so(
             assert mapper.begin_place(later) == []
         assert "no transition from place 1" in caplog.text
         assert "max_gap_s" in caplog.text
+
+
+def test_a_place_begun_without_a_link_is_joined_by_the_estimate_at_the_end_of_its_cross(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """The cyclic experiment over ROS 2 (notes of 2026-12-06): tracking lost on the way,
+    the view contradicting the estimate (odometry doubted), a learn begun before
+    relocalisation confirmed anything: no link at the start. At the end of the cross the
+    robot stands near the reference again and is seen reliably in place 1: that joins it,
+    T_1_reference = T_1_robot ⊕ T_reference_robot⁻¹."""
+    with MapStore.open(tmp_path / "map.db", "abc123") as store:
+        mapper = Mapper(store, OdometryNoiseSettings())
+        here = _driven(mapper, 1.0)  # place 1 at the origin, then 1 m on along x
+        mapper.odometry_doubted()
+        with caplog.at_level(logging.WARNING, logger="daemon.service.mapper"):
+            assert mapper.begin_place(here) == []
+        assert "the view contradicting the estimate" in caplog.text
+        # The cross ends 2 cm to the left of where it began, turned by 0.01 rad.
+        cross = [Odometry(1.0, 0.02 * k / 100, 0.01 * k / 100,
+                          here.stamp_ns + k * 20_000_000, 800 + k) for k in range(1, 101)]
+        mapper.on_odometry(cross)
+        end = cross[-1]
+        seen = UncertainSE2(SE2(1.05, 0.03, 0.02), np.diag([0.03, 0.03, 0.02]) ** 2)
+        stored, added = mapper.add_place(synthetic_place(np.random.default_rng(2), "b"), [],
+                                         seen_at_end=(1, seen))
+        [link] = [t for t in added if t.to_id == stored.id]
+        assert (link.from_id, link.source) == (1, "vision")
+        expected = SE2(1.05, 0.03, 0.02).compose(SE2(0.0, 0.02, 0.01).inverse())
+        assert np.allclose(link.T_from_to.mean.as_tuple(), expected.as_tuple(), atol=1e-9)
+        assert link.T_from_to.covariance[0, 0] > seen.covariance[0, 0]  # the cross's odometry adds
+        # Seen too far from a place's reference to trust (_closing): no link, as at the start.
+        mapper.odometry_doubted()
+        mapper.begin_place(end)
+        far = UncertainSE2(SE2(2.6, 0.0, 0.0), np.diag([0.03, 0.03, 0.02]) ** 2)
+        alone, added = mapper.add_place(synthetic_place(np.random.default_rng(3), "c"), [],
+                                        seen_at_end=(1, far))
+        assert added == []

@@ -69,3 +69,6 @@ def test_a_gap_in_odometry_breaks_the_chain() -> None:
     assert not chain.broken
     chain.add(Odometry(0.2, 0, 0, 2_000_000_000, 2))  # 1.9 s of silence
     assert chain.broken
+    assert chain.broken_by is not None and "1.90 s" in chain.broken_by
+    chain.break_off("later")
+    assert "1.90 s" in chain.broken_by  # the first reason is kept

@@ -37,7 +37,16 @@ class OdometryChain:
         self._P[3, 3] = noise.scale_sigma ** 2
         self._P[4, 4] = noise.heading_drift_sigma_rad_per_m ** 2
         self.distance_m = 0.0
-        self.broken = False
+        self.broken_by: str | None = None  # why no transition is measured any more
+
+    @property
+    def broken(self) -> bool:
+        return self.broken_by is not None
+
+    def break_off(self, why: str) -> None:
+        """No transition is measured across what happened (the first reason is kept)."""
+        if self.broken_by is None:
+            self.broken_by = why
 
     @property
     def last(self) -> Odometry:
@@ -52,7 +61,7 @@ class OdometryChain:
         if gap_s <= 0.0:
             return  # a repeat or out of order: the odometry buffer counts those
         if gap_s > self.noise.max_gap_s:
-            self.broken = True
+            self.break_off(f"odometry silent for {gap_s:.2f} s, over [odometry] max_gap_s")
             return
         a = SE2(self._last.x, self._last.y, self._last.yaw)
         u = a.between(SE2(sample.x, sample.y, sample.yaw))

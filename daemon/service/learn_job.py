@@ -237,7 +237,8 @@ class LearnJob:
             learned = self.session.store_place(
                 place, self._links, tbl.views,
                 on_stored=lambda _: self._reply("progress", {"phase": "lookalikes",
-                                                             "fraction": 1.0}))
+                                                             "fraction": 1.0}),
+                seen_at_end=self._seen())
             stored, transitions = learned.place, learned.transitions
             outcome = LearnOutcome(stored, None, "", learned.lookalikes, tbl.start.stamp_ns,
                                    learned.events, time.perf_counter() - driven)

@@ -139,7 +139,7 @@ class Mapper:
         with self._lock:
             for chain in (self._chain, self._pending):
                 if chain is not None:
-                    chain.broken = True
+                    chain.break_off("the base was opened again")
 
     def odometry_doubted(self) -> None:
         """Tracking was lost: the robot may have been carried off, which odometry cannot
@@ -149,7 +149,8 @@ class Mapper:
         keeps its own run: its job watches the robot."""
         with self._lock:
             if self._chain is not None:
-                self._chain.broken = True
+                self._chain.break_off("tracking was lost, the view contradicting the "
+                                      "estimate")
 
     # ------------------------------------------------------------ learning
     def begin_place(self, reference: Odometry, seen: Seen | None = None) -> list[Link]:
@@ -174,9 +175,9 @@ class Mapper:
                     # Joined to the map only when a cycle is later closed to it; the
                     # localiser reaches it meanwhile as it reaches an unjoined place.
                     log.warning("place being learned: no transition from place %d (%s) and "
-                                "no reliable estimate to join it by", last,
-                                "odometry broke: a gap over [odometry] max_gap_s"
-                                if chain is not None and chain.broken else "no odometry run")
+                                "no reliable estimate to join it by yet", last,
+                                chain.broken_by if chain is not None and chain.broken_by
+                                else "no odometry run")
                 return [] if odometry is None else [odometry]
             if odometry is None:
                 return [Link(seen[0], seen[1], "vision")]
@@ -191,17 +192,43 @@ class Mapper:
                 return [odometry]
             return [Link(seen[0], odometry.T_from_new.fuse(seen[1]), "vision")]
 
+    def late_link(self, seen: Seen) -> list[Link]:
+        """The link of a place in work that began with none (its odometry run from the
+        last place ended by a loss or a gap, and no reliable estimate then), from the
+        robot seen reliably in ``seen[0]`` at the end of its cross: Turn Back and Look
+        ends where it began (§4.3), so with the odometry run of the cross from the
+        reference to here, T_seen_reference = T_seen_robot ⊕ T_reference_robot⁻¹. A
+        loss on the way to a place usually ends in relocalisation during its learn; without
+        this the place starts a segment of its own beside the map (the cyclic experiment
+        over ROS 2 lost its whole frame so). As at the start, only near the seen place's
+        reference (``_closing``)."""
+        with self._lock:
+            pending = self._pending
+            if pending is None or pending.broken or seen[0] not in self.graph:
+                return []
+            T_seen_reference = seen[1].compose(pending.relative().inverse())
+            links = _closing((seen[0], T_seen_reference))
+        if links:
+            log.info("place being learned: joined to place %d by the estimate at the end of "
+                     "its cross", seen[0])
+        return links
+
     def cancel_place(self) -> None:
         with self._lock:
             self._pending = None
 
-    def add_place(self, place: Place, links: list[Link]) -> tuple[Place, list[Transition]]:
+    def add_place(self, place: Place, links: list[Link], seen_at_end: Seen | None = None
+                  ) -> tuple[Place, list[Transition]]:
         """Store a learned place (with its transitions from the places it joins, both
-        ways) and make it the one the next place is measured from."""
+        ways) and make it the one the next place is measured from. ``seen_at_end``: the
+        localiser's reliable estimate once the cross is driven; a place that began with
+        no link is joined by it (:meth:`late_link`)."""
         if place.reference_panorama is not None and (
                 place.background_estimate is None or place.signature is None):
             place = with_cues(place)
         with self._lock:
+            if not links and seen_at_end is not None:
+                links = self.late_link(seen_at_end)
             stored = self.store.add_place(
                 place, [(link.from_id, link.T_from_new, link.source) for link in links])
             # In memory without its panorama: the map file has it (design §6).

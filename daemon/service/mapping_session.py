@@ -221,16 +221,18 @@ class MappingSession:
         self.mapper.cancel_place()
 
     def store_place(self, place: Place, links: list[Link], views: list[np.ndarray],
-                    on_stored: Callable[[Place], None] = lambda _: None) -> Learned:
+                    on_stored: Callable[[Place], None] = lambda _: None,
+                    seen_at_end: Seen | None = None) -> Learned:
         """A place just learned: stored with its transitions, then its backgrounds in
         other places' views and its look-alikes' features (design §5, §9), then shown
         to the localiser. ``on_stored``: called once the place itself is in the map file
-        (a failure after that loses only cues that can be redone)."""
+        (a failure after that loses only cues that can be redone); ``seen_at_end``: the
+        localiser's reliable estimate once the cross is driven (Mapper.late_link)."""
         if not self.mapping:
             raise PlacecellError("the map is read-only in localisation mode")
         with self._lock:
             before = dict(self.mapper.segment_of)
-            stored, transitions = self.mapper.add_place(place, links)
+            stored, transitions = self.mapper.add_place(place, links, seen_at_end)
             on_stored(stored)
             changed: list[Place] = []
             pairs = []

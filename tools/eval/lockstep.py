@@ -240,7 +240,7 @@ class Run:
         learned = self.session.store_place(
             Place(tbl.result(), tbl.reference_panorama, label=label,
                   local_space=self.localiser.place_profile(tbl.reference_panorama)),
-            links, tbl.views)
+            links, tbl.views, seen_at_end=self.localiser.reliable_estimate())
         self.events += learned.events
         self.localiser.place_learned(learned.place.id)  # as the daemon does
         self.references[learned.place.id] = self.cfg.mount.camera_pose(SE2.of(truth[0]))

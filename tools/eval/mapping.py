@@ -236,7 +236,8 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
             ref = _reference_pose(robot)
             learned = session.store_place(Place(
                 tbl.result(), tbl.reference_panorama, created_unix_s=time.time(),
-                local_space=localiser.place_profile(tbl.reference_panorama)), links, tbl.views)
+                local_space=localiser.place_profile(tbl.reference_panorama)), links, tbl.views,
+                seen_at_end=localiser.reliable_estimate())
             refs.append(ref)
             localiser.place_learned(learned.place.id)  # as the daemon does after a learn
             last_pose = robot.true_pose()
