@@ -25,9 +25,12 @@ class Ros2DiffDriveRobot:
 
     def __init__(self, port: int, rate_hz: float = 50.0, cmd_timeout_s: float = 0.5,
                  domain_id: int = 0, odom_topic: str = "/odom",
-                 cmd_vel_topic: str = "/cmd_vel") -> None:
+                 cmd_vel_topic: str = "/cmd_vel", coast_s: float = 0.0) -> None:
         self.session = wire.open_session(listen=[f"tcp/127.0.0.1:{port}"])
         self.rate_hz, self.cmd_timeout_s = rate_hz, cmd_timeout_s
+        self.coast_s = coast_s  # a zero Twist takes effect this late (a robot decelerating)
+        self._coast_until = 0.0
+        self.stopped_at: float | None = None  # monotonic: when the last coast ended
         self._lock = threading.Lock()
         self.pose = (0.0, 0.0, 0.0)  # x, y, yaw in the odometry frame (its truth)
         self.command = (0.0, 0.0)  # v, w being driven
@@ -47,8 +50,13 @@ class Ros2DiffDriveRobot:
         msg: Any = wire.TYPESTORE.deserialize_cdr(sample.payload.to_bytes(), TWIST)
         with self._lock:
             self.commands.append((msg.linear.x, msg.linear.y, msg.angular.z))
-            self.command = (float(msg.linear.x), float(msg.angular.z))  # no sideways wheels
-            self._command_at = time.monotonic()
+            command = (float(msg.linear.x), float(msg.angular.z))  # no sideways wheels
+            now = time.monotonic()
+            if command == (0.0, 0.0) and self.command != (0.0, 0.0) and self.coast_s > 0:
+                self._coast_until = now + self.coast_s  # keeps going a while
+            elif now >= self._coast_until:
+                self.command = command
+            self._command_at = now
 
     def _run(self) -> None:
         last = time.monotonic()
@@ -57,7 +65,10 @@ class Ros2DiffDriveRobot:
             now = time.monotonic()
             dt, last = now - last, now
             with self._lock:
-                if now - self._command_at > self.cmd_timeout_s:
+                if now - self._command_at > self.cmd_timeout_s or (
+                        self._coast_until and now >= self._coast_until):
+                    if self._coast_until:
+                        self._coast_until, self.stopped_at = 0.0, now
                     self.command = (0.0, 0.0)
                 v, w = self.command
                 x, y, yaw = self.pose

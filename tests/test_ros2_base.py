@@ -10,10 +10,11 @@ from collections.abc import Iterator
 import pytest
 
 from daemon.config import load
-from hal.base.ros2 import Goal, Ros2Base, move_command
+from hal.base.ros2 import Goal, Ros2Base, at_rest, move_command
 from hal.base.settings import BaseSettings, Ros2BaseSettings
 from hal.registry import HalContext, create_base
 from kernel.errors import CommandRejectedError, ConfigError
+from kernel.types import Odometry
 from tests.daemon_harness import free_port, wait_for
 from tests.ros2_diffdrive import Ros2DiffDriveRobot
 
@@ -50,6 +51,18 @@ def test_a_holonomic_move_goes_straight_for_the_goal() -> None:
     assert cmd is not None and cmd[0] == pytest.approx(0.2) and abs(cmd[1]) < 1e-9
     cmd = move_command((0.0, 0.0, 0.0), Goal(0.0, 1.0, 0.0, 0.2), "holonomic", S)
     assert cmd is not None and cmd[1] == pytest.approx(0.2)  # sideways
+
+
+def test_at_rest_needs_the_whole_window_still() -> None:
+    def odo(t_s: float, x: float, yaw: float = 0.0) -> Odometry:
+        return Odometry(x, 0.0, yaw, int(t_s * 1e9), 0)
+
+    still = [odo(0.0, 1.0), odo(0.1, 1.001), odo(0.2, 1.0)]
+    assert at_rest(still, 0.2)
+    assert not at_rest(still[1:], 0.2)  # 0.1 s of samples: not known yet
+    assert not at_rest([odo(0.0, 0.99), *still[1:]], 0.2)  # 1 cm at the window's start
+    assert not at_rest([*still[:2], odo(0.2, 1.0, 0.01)], 0.2)  # still turning
+    assert at_rest([], 0.2)  # no odometry: no motion known
 
 
 def test_topics_that_are_not_ros2_names_are_refused(tmp_path: object) -> None:
@@ -105,7 +118,8 @@ def test_the_watchdog_stops_the_robot_when_odometry_or_the_daemon_goes_quiet(
     # A velocity not repeated: stopped after command_timeout_s (a zero Twist sent).
     base.velocity(0.1, 0.0, 0.0)
     assert wait_for(lambda: base.stats()["watchdog_stops"] == 1, MOVE_WAIT_S)
-    assert robot.commands[-1] == (0.0, 0.0, 0.0) and not base.status().moving
+    assert robot.commands[-1] == (0.0, 0.0, 0.0)
+    assert wait_for(lambda: not base.status().moving, MOVE_WAIT_S)  # once odometry is still
     # Odometry stops while a move is under way: stopped, fault until it is back.
     base.move_relative(2.0, 0.0, 0.0, 0.2)
     assert wait_for(lambda: any(c[0] > 0 for c in robot.commands[-3:]), MOVE_WAIT_S)
@@ -116,3 +130,31 @@ def test_the_watchdog_stops_the_robot_when_odometry_or_the_daemon_goes_quiet(
     robot.publishing = True
     assert wait_for(lambda: not base.status().fault, MOVE_WAIT_S)
     assert not base.status().move_done  # the move was abandoned, not done
+
+
+def test_a_stopped_robot_counts_as_moving_until_its_odometry_is_still() -> None:
+    """Turn Back and Look takes its reference frames once the base stands (§4.2): a ROS 2
+    base decelerates after the zero Twist, so `moving` holds until odometry has stayed
+    within 2 mm for [base.ros2] at_rest_s (cyclic over ROS 2 took references while the
+    robot still slid on, notes of 2026-12-06)."""
+    port = free_port()
+    robot = Ros2DiffDriveRobot(port, coast_s=0.4)
+    base = create_base(BaseSettings(backend="ros2", ros2=Ros2BaseSettings(
+        connect=[f"tcp/127.0.0.1:{port}"])), HalContext(load(None)))
+    assert isinstance(base, Ros2Base)
+    base.open()
+    try:
+        base.read(MOVE_WAIT_S)
+        assert wait_for(lambda: not base.status().moving, MOVE_WAIT_S)  # standing
+        base.velocity(0.2, 0.0, 0.0)
+        assert wait_for(lambda: robot.pose[0] > 0.02, MOVE_WAIT_S)
+        base.stop()
+        assert base.status().moving  # the zero Twist sent; the robot coasts on
+        assert wait_for(lambda: not base.status().moving, MOVE_WAIT_S)
+        assert robot.stopped_at is not None  # still only once the coast had ended
+        at = robot.pose
+        assert wait_for(lambda: base.read(MOVE_WAIT_S)[-1].stamp_ns > 0, MOVE_WAIT_S)
+        assert math.hypot(robot.pose[0] - at[0], robot.pose[1] - at[1]) < 1e-9
+    finally:
+        base.close()
+        robot.close()

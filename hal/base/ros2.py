@@ -23,6 +23,7 @@ moving, and when the daemon goes quiet: a ``velocity`` not repeated in time, and
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import logging
 import math
@@ -96,6 +97,25 @@ def twist(vx: float, vy: float, w: float) -> Any:
     return t[TWIST](linear=v3(x=vx, y=vy, z=0.0), angular=v3(x=0.0, y=0.0, z=w))
 
 
+AT_REST_M = 0.002  # odometry this still over [base.ros2] at_rest_s: the robot stands
+AT_REST_RAD = 0.005
+
+
+def at_rest(recent: list[Odometry], window_s: float) -> bool:
+    """Whether odometry samples (oldest first) show the robot still: the samples cover
+    ``window_s`` up to the last one and all lie within AT_REST_M and AT_REST_RAD of it;
+    too few to cover the window: not known to be still. No odometry at all: no motion
+    known either (a learn then fails on the missing odometry)."""
+    if not recent:
+        return True
+    if recent[0].stamp_ns > recent[-1].stamp_ns - int(window_s * 1e9):
+        return False
+    last = recent[-1]
+    return all(math.hypot(o.x - last.x, o.y - last.y) <= AT_REST_M
+               and abs(math.remainder(o.yaw - last.yaw, 2 * math.pi)) <= AT_REST_RAD
+               for o in recent)
+
+
 @dataclass(frozen=True)
 class Goal:
     """A relative move's goal in the odometry frame."""
@@ -148,6 +168,8 @@ class Ros2Base:
         self._cond = threading.Condition()
         self._samples: list[Odometry] = []
         self._latest: Odometry | None = None
+        # The samples of the last at_rest_s (and the one before): is the robot still?
+        self._recent: collections.deque[Odometry] = collections.deque()
         self._latest_arrival = 0.0  # monotonic s
         self._seq = 0
         self._goal: Goal | None = None
@@ -225,6 +247,10 @@ class Ros2Base:
             odo = Odometry(x, y, yaw, stamp_ns, self._seq)
             self._samples.append(odo)
             self._latest, self._latest_arrival = odo, time.monotonic()
+            self._recent.append(odo)
+            while len(self._recent) > 2 and self._recent[1].stamp_ns <= stamp_ns - int(
+                    self._settings.at_rest_s * 1e9):
+                self._recent.popleft()
             self._counts["samples"] += 1
             if self._fault:
                 log.info("%s: odometry again", self._settings.odom_topic)
@@ -240,8 +266,13 @@ class Ros2Base:
         return out
 
     def status(self) -> BaseStatus:
+        """``moving`` while a command is under way and, after it, until the odometry shows
+        the robot still (``at_rest``): a stop is obeyed over the robot's deceleration.
+        Odometry quiet past odometry_timeout_s tells nothing: the commands alone count."""
         with self._cond:
-            return BaseStatus(moving=self._moving, move_done=self._move_done,
+            fresh = time.monotonic() - self._latest_arrival <= self._settings.odometry_timeout_s
+            still = not fresh or at_rest(list(self._recent), self._settings.at_rest_s)
+            return BaseStatus(moving=self._moving or not still, move_done=self._move_done,
                               fault=self._fault)
 
     def stats(self) -> Mapping[str, float]:

@@ -99,6 +99,10 @@ class Ros2BaseSettings:
                                         "long while moving stops the robot")
     command_timeout_s: float = setting(0.5, gt=0.0, le=10.0, doc="watchdog: a velocity not "
                                        "repeated within this stops the robot")
+    at_rest_s: float = setting(0.2, gt=0.0, le=5.0, doc="after a stop or a move, the base "
+                               "counts as moving until its odometry has stayed within 2 mm "
+                               "and 0.005 rad for this long (the robot decelerates after the "
+                               "last command; Turn Back and Look takes its reference at rest)")
 
     def __post_init__(self) -> None:
         for name in ("odom_topic", "cmd_vel_topic"):
