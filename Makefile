@@ -37,7 +37,8 @@ typecheck: $(STAMP)
 pytest: $(STAMP)
 	$(BIN)/pytest -q -n 2 --dist loadgroup
 
-# zenoh's router at the binding's version, built once per machine (tools/build-zenohd.sh).
+# zenoh's router and its storage manager plugin at the binding's version, built once per
+# machine (tools/build-zenohd.sh).
 zenohd: $(STAMP)
 	tools/build-zenohd.sh
 

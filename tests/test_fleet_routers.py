@@ -1,0 +1,79 @@
+"""The fleet's routers (docs/fleet.md, config/fleet/router.json5): two zenohd processes
+with the storage manager plugin, each storing the fleet's key space and replicating it.
+What one robot puts through one router is stored by both; a router killed and restarted
+empty takes what was put while it was away from the other; with the first router then gone
+too, nothing stored is lost."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from tests.daemon_harness import free_port, wait_for
+from tools.fleet_router import fleet_routers
+
+KEYS = "placecell/fleet/test"
+START_S = 60.0  # a router's start on a loaded machine
+# The replicas compare digests every `interval` (1 s in the shipped configuration); a
+# restarted router aligns within a few of them.
+CAUGHT_UP_S = 60.0
+
+pytestmark = pytest.mark.xdist_group("zenohd")
+
+
+def _client(endpoint: str) -> zenoh.Session:
+    config = zenoh.Config()
+    config.insert_json5("mode", json.dumps("client"))
+    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(config)
+
+
+def _stored_by(session: zenoh.Session, zid: str) -> set[str]:
+    """The keys router ``zid``'s storage answers with (every storage is asked)."""
+    keys = set()
+    for reply in session.get(f"{KEYS}/**", target=zenoh.QueryTarget.ALL,
+                             consolidation=zenoh.ConsolidationMode.NONE, timeout=5.0):
+        replier = reply.replier_id
+        if reply.ok is not None and replier is not None and str(replier.zid) == zid:
+            keys.add(str(reply.ok.key_expr))
+    return keys
+
+
+def test_a_restarted_router_takes_what_it_missed_from_the_other(tmp_path: Path) -> None:
+    ports = [free_port(), free_port()]
+    with fleet_routers(ports, tmp_path, START_S) as (a, b):
+        robot = _client(a.endpoint)
+        watcher = _client(b.endpoint)
+        try:
+            # A client sends a put only where it knows a subscriber (the storages'): once
+            # the router has told it of them.
+            probe = robot.declare_publisher(f"{KEYS}/place/0")
+            assert wait_for(lambda: probe.matching_status.matching, START_S, 0.05)
+            first = {f"{KEYS}/place/{k}" for k in range(10)}
+            for key in sorted(first):
+                robot.put(key, json.dumps({"key": key}))
+            # Both routers store what one robot put through one of them.
+            assert wait_for(lambda: _stored_by(watcher, b.zid) >= first, CAUGHT_UP_S, 0.2), \
+                _stored_by(watcher, b.zid)
+            assert wait_for(lambda: _stored_by(watcher, a.zid) >= first, CAUGHT_UP_S, 0.2)
+            b.stop()
+            second = {f"{KEYS}/place/{k}" for k in range(10, 20)}
+            for key in sorted(second):
+                robot.put(key, json.dumps({"key": key}))
+            b.start(START_S)  # empty: its storage is in memory
+            watcher.close()
+            watcher = _client(b.endpoint)
+            assert wait_for(lambda: _stored_by(watcher, b.zid) == first | second,
+                            CAUGHT_UP_S, 0.2), sorted(_stored_by(watcher, b.zid))
+            a.stop()  # the router the robot put through is gone: nothing is lost
+            got = {str(r.ok.key_expr): json.loads(r.ok.payload.to_string())
+                   for r in watcher.get(f"{KEYS}/**", timeout=5.0) if r.ok is not None}
+            assert set(got) == first | second
+            assert all(value == {"key": key} for key, value in got.items())
+        finally:
+            robot.close()
+            watcher.close()
