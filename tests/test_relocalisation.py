@@ -11,6 +11,7 @@ from daemon.localisation.relocalisation import (
     after_recovering,
     after_tracking,
     contradicted,
+    loss_contradicts,
 )
 from daemon.localisation.settings import LocalisationSettings
 
@@ -139,3 +140,33 @@ def test_a_rejected_pick_searches_on_without_it_and_found_again_in_step_one() ->
     assert machine.mode == "recover"
     events = _frames(machine, t, 1, 0.6, True, places, 1, 110)
     assert events[0].kind == "relocalised" and events[0].how == "local"
+
+
+def test_a_loss_contradicts_odometry_only_after_the_robot_was_found_and_not_blind() -> None:
+    assert loss_contradicts(by_sensor=True, blind=False, guessing=False)
+    assert loss_contradicts(by_sensor=False, blind=True, guessing=False)  # a leader
+    assert not loss_contradicts(by_sensor=True, blind=True, guessing=False)
+    assert not loss_contradicts(by_sensor=True, blind=False, guessing=True)
+    assert not loss_contradicts(by_sensor=False, blind=False, guessing=True)
+
+
+def test_a_loss_of_a_tracker_started_from_a_guess_is_no_evidence_of_a_kidnap() -> None:
+    """Coming round a loop, the tracker starts over at the place's reference (a guess):
+    lost before it ever found the robot, the guess was wrong; once found, a loss again
+    says the robot may have been carried off."""
+    places = [1, 2]
+    machine = Relocalisation(S)
+    machine.told(0, 0, None)
+    t = Scripted(machine, {1: 0.0, 2: 0.0})
+    machine.switched(guessed=True)
+    [lost] = [e for e in _frames(machine, t, S.loss_frames, 0.01, False, places, 2, 1) if e]
+    assert lost.kind == "lost" and not lost.contradicted
+    machine.told(0, 10, None)  # tracked again (the operator)
+    machine.switched(guessed=True)
+    _frames(machine, t, 1, 0.6, True, places, 2, 11)  # found: the guess held
+    [lost] = [e for e in _frames(machine, t, S.loss_frames, 0.01, False, places, 2, 12) if e]
+    assert lost.contradicted
+    machine.told(0, 20, None)
+    machine.switched()  # the estimate carried over a transition: no guess
+    [lost] = [e for e in _frames(machine, t, S.loss_frames, 0.01, False, places, 2, 21) if e]
+    assert lost.contradicted

@@ -628,7 +628,9 @@ class Localiser:
                                              OdometryChain(odo, self.odometry_noise),
                                              self.settings)
         self.tracker = tracker
-        self.reloc.switched()  # a new place's landmarks: its own evidence from here on
+        # A new place's landmarks: its own evidence from here on; from a guess unless the
+        # estimate was carried over a transition.
+        self.reloc.switched(guessed=switch.kind != "neighbour")
         return tuple(scores), current
 
     def _observe_closure(self, local: LocalResult) -> Transition | None:
@@ -729,7 +731,7 @@ class Localiser:
                                          OdometryChain(odo, self.odometry_noise),
                                          self.settings)
         self.tracker = tracker
-        self.reloc.switched()
+        self.reloc.switched(guessed=True)
         return current
 
 

@@ -75,6 +75,19 @@ def contradicted(support: float | None, confidence: float,
     return confidence <= 0.0 or (support is not None and support < settings.doubt_output)
 
 
+def loss_contradicts(by_sensor: bool, blind: bool, guessing: bool) -> bool:
+    """Whether a loss is evidence the robot may have been carried off (the odometry run
+    from the last place learned then measures nothing, design §6): the view contradicted
+    the estimate — by the sensor output or by another place leading the search — but
+    not after blind travel (no evidence either way), and not while the tracker started
+    from a guess has not yet found the robot: then the guess was wrong, not the odometry
+    (cyclic over ROS 2, notes of 2026-12-06: a switch coming round the loop started 2 m
+    off, was lost 5 frames later, and the place learned next lost its link)."""
+    if guessing:
+        return False
+    return not (by_sensor and blind)
+
+
 # ------------------------------------------------------------------ the machine
 class Trackers(Protocol):
     """What the machine asks of the localiser (daemon/localisation/localiser.py)."""
@@ -127,6 +140,10 @@ class Relocalisation:
         self.lead_watch = LeadWatch(settings)
         self.undecided: int | None = None  # the search's pick while look-alikes stand tied
         self.ambiguous_frames = 0  # the search's pick ambiguous this many frames in a row
+        # The tracker was started from a guess (a place entered with no transition from
+        # the last: its reference, the orientation from the bearings) and has not found
+        # the robot yet: a loss now says the guess was wrong, not that the robot moved.
+        self.guessing = False
 
     # -------------------------------------------------------------- transitions
     def begin_search(self, stamp_ns: int, frame: int, rejected: set[int] | None = None,
@@ -163,9 +180,11 @@ class Relocalisation:
         else:
             self.mode, self.mode_frames, self.episode = "track", 0, None
 
-    def switched(self) -> None:
-        """Tracking passed to another place: its own evidence from here on."""
+    def switched(self, guessed: bool = False) -> None:
+        """Tracking passed to another place: its own evidence from here on. ``guessed``:
+        the new tracker starts from a guess rather than the estimate carried over."""
         self.loss.reset()
+        self.guessing = guessed
 
     def _relocalised(self, place_id: int, how: str, stamp_ns: int, frame: int
                      ) -> LocalisationEvent:
@@ -214,6 +233,8 @@ class Relocalisation:
         s = self.settings
         lost_now = self.loss.observe(support, travelled_m)
         self.mode_frames += 1
+        if found:
+            self.guessing = False
         scored: list[PlaceScore] = []
         if self.mode != "confirm" and (self.loss.suspicious or self.mode == "recover"):
             if not self.search.running:
@@ -229,7 +250,8 @@ class Relocalisation:
             event = LocalisationEvent("lost", current, self.loss.why if lost_now else
                                       f"another place led the search by "
                                       f"{s.search_margin} for {s.led_frames} frames",
-                                      contradicted=not (lost_now and self.loss.blind))
+                                      contradicted=loss_contradicts(
+                                          lost_now, self.loss.blind, self.guessing))
             trackers.lost(by_sensor=lost_now)
             self.lead_watch.reset()
             leader = self.leader(trackers, current, places)
