@@ -198,10 +198,9 @@ class Mapper:
         robot seen reliably in ``seen[0]`` at the end of its cross: Turn Back and Look
         ends where it began (§4.3), so with the odometry run of the cross from the
         reference to here, T_seen_reference = T_seen_robot ⊕ T_reference_robot⁻¹. A
-        loss on the way to a place usually ends in relocalisation during its learn; without
-        this the place starts a segment of its own beside the map (the cyclic experiment
-        over ROS 2 lost its whole frame so). As at the start, only near the seen place's
-        reference (``_closing``)."""
+        loss just before a learn may end in relocalisation during it; without this the
+        place starts a segment of its own beside the map until a cycle is closed to it.
+        As at the start, only near the seen place's reference (``_closing``)."""
         with self._lock:
             pending = self._pending
             if pending is None or pending.broken or seen[0] not in self.graph:
