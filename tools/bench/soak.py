@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 
 from daemon.store.sqlite_store import MapStore
-from tools.bench.daemon import _daemon, _wait
+from tools.bench.daemon import WAIT_S, _daemon, _wait
 
 FRESH_S = 60.0  # the fresh daemon runs this long before its memory is read
 
@@ -47,7 +47,7 @@ def _run_for(run_dir: Path, overrides: dict[str, object], seconds: float) -> flo
         end = first + seconds
         with seen.changed:
             seen.changed.wait_for(lambda: seen.arrivals[-1] >= end,
-                                  timeout=max(0.0, end - time.monotonic()) + 60.0)
+                                  timeout=max(0.0, end - time.monotonic()) + WAIT_S)
             if seen.arrivals[-1] < end:
                 raise RuntimeError(f"the daemon stopped publishing beliefs after "
                                    f"{seen.arrivals[-1] - first:.0f} s of {seconds:.0f}")
