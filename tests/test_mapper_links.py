@@ -11,7 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from daemon.mapping.odometry_chain import held_verdict
 from daemon.mapping.settings import OdometryNoiseSettings
+from daemon.mapping.transition import Transition
 from daemon.service.mapper import Mapper
 from daemon.store.sqlite_store import MapStore
 from kernel.se2 import SE2, UncertainSE2
@@ -128,3 +130,57 @@ def test_a_place_begun_without_a_link_is_joined_by_the_estimate_at_the_end_of_it
         alone, added = mapper.add_place(synthetic_place(np.random.default_rng(3), "c"), [],
                                         seen_at_end=(1, far))
         assert added == []
+
+
+def _held_then_closed(tmp_path: Path, place_1_to_3_m: float
+                      ) -> tuple[Mapper, list[int], list[Transition]]:
+    """Place 1 at the odometry origin; 2 m on, tracking lost with the view contradicting
+    the estimate (odometry doubted) and place 2 learned with no link (its odometry from 1
+    held); 2 m on, place 3 linked to 2 by odometry; then a cycle closed from 3 to 1,
+    measured by vision as ``place_1_to_3_m`` along x."""
+    mapper = Mapper(MapStore.open(tmp_path / "map.db", "abc123"), OdometryNoiseSettings())
+    here = _driven(mapper, 2.0)
+    mapper.odometry_doubted()
+    assert mapper.begin_place(here) == []
+    two, added = mapper.add_place(synthetic_place(np.random.default_rng(2), "b"), [])
+    assert added == [] and mapper.segment_of[two.id] == two.id  # a segment of its own
+    later = [Odometry(2.0 + 2.0 * k / 100, 0.0, 0.0, here.stamp_ns + k * 20_000_000, 300 + k)
+             for k in range(1, 101)]
+    mapper.on_odometry(later)
+    [link] = mapper.begin_place(later[-1])
+    three, _ = mapper.add_place(synthetic_place(np.random.default_rng(3), "c"), [link])
+    closing = Transition(three.id, 1, UncertainSE2(SE2(-place_1_to_3_m, 0.0, 0.0), np.diag(
+        [0.05, 0.05, 0.02]) ** 2), "cycle")
+    return mapper, [1, two.id, three.id], mapper.add_transition(closing)
+
+
+def test_odometry_held_across_a_loss_is_stored_once_a_path_through_the_map_agrees(
+        tmp_path: Path) -> None:
+    """The cyclic tour on the ROS 2 robot (notes of 2026-12-06): a loss at the edge of a
+    place's view, odometry right all along, the next place left unjoined until the lap
+    closed, and the cycle then stayed open. Closed by vision 4 m from place 1, the path
+    1 → 3 → 2 puts place 2 where the held odometry does: stored, the map one segment."""
+    mapper, (one, two, three), confirmed = _held_then_closed(tmp_path, 4.0)
+    assert [(t.from_id, t.to_id, t.source) for t in confirmed] == [
+        (one, two, "odometry"), (two, one, "odometry")]
+    assert confirmed[0].T_from_to.mean.x == pytest.approx(2.0)
+    assert set(mapper.segment_of.values()) == {one}
+    assert mapper.store.load().transition(one, two) is not None  # in the file too
+    path = mapper.graph.path(two, three)  # the direct transition, fewest steps
+    assert path is not None and path.mean.x == pytest.approx(2.0)
+
+
+def test_odometry_held_across_a_kidnap_is_refused_when_the_path_disagrees(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """The same, but the robot was carried 5 m at the loss: the lap closes 9 m from place
+    1, the path puts place 2 7 m from it and the held odometry 2 m: refused, never
+    stored (the map stays joined by the measured cycle alone)."""
+    with caplog.at_level(logging.WARNING, logger="daemon.service.mapper"):
+        mapper, (one, two, three), confirmed = _held_then_closed(tmp_path, 9.0)
+    assert confirmed == []
+    assert "held odometry 1 -> 2 refused" in caplog.text
+    assert mapper.graph.transition(one, two) is None
+    assert mapper.store.load().transition(one, two) is None
+    assert set(mapper.segment_of.values()) == {one}  # joined by the cycle 3 -> 1
+    held = UncertainSE2(SE2(2.0, 0.0, 0.0), np.diag([0.03, 0.03, 0.01]) ** 2)
+    assert held_verdict(held, None) is None  # no path yet: wait

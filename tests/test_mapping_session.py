@@ -115,12 +115,14 @@ def test_the_autopilot_learns_the_first_place_a_faded_one_and_in_unmapped_space(
     assert whys[6] is not None and whys[6].startswith("unmapped space")
 
 
-def test_a_loss_ends_the_odometry_run_from_the_last_place(tmp_path: Path) -> None:
+def test_a_loss_holds_the_odometry_run_from_the_last_place(tmp_path: Path) -> None:
     """A place learned after a loss where the view contradicted the estimate is not linked
-    to the last place by odometry: the robot may have been carried off in between, which
-    odometry cannot see (office 2: a link across a kidnap put a place 9.8 m off). Before
-    the loss the run links; a relocalised event or a loss by blind travel does not end it;
-    in localisation mode a loss ends it too (an operator's learn)."""
+    to the last place by odometry at once: the robot may have been carried off in
+    between, which odometry cannot see (office 2: a link across a kidnap put a place
+    9.8 m off); the run is held until a path through the map checks it
+    (tests/test_mapper_links.py). Before the loss the run links; a relocalised event or a
+    loss by blind travel does not hold it; in localisation mode a loss holds it too (an
+    operator's learn)."""
     for mode in ("mapping", "localisation"):
         session = _session(tmp_path / f"{mode}.db", mode)
         mapper = session.mapper

@@ -6,13 +6,14 @@ held both ways, so neighbours are one dictionary lookup.
 
 from __future__ import annotations
 
+import collections
 from collections.abc import Iterable
 
 from daemon.mapping.place import Place
 from daemon.mapping.transition import Transition
 from daemon.vision.disambiguation import PairFeatures
 from daemon.vision.floor import FloorModel
-from kernel.se2 import SE2
+from kernel.se2 import SE2, UncertainSE2
 
 
 class TopologicalMap:
@@ -91,6 +92,21 @@ class TopologicalMap:
                     queue.append(b)
         del found[start]
         return found
+
+    def path(self, start: int, end: int) -> UncertainSE2 | None:
+        """T_start_end composed along the path of fewest transitions (breadth first),
+        with its covariance; None when no path joins them."""
+        found = {start: UncertainSE2(SE2())}
+        queue = collections.deque([start])
+        while queue:
+            a = queue.popleft()
+            if a == end:
+                return found[a]
+            for b, t in self._edges.get(a, {}).items():
+                if b not in found:
+                    found[b] = found[a].compose(t.T_from_to)
+                    queue.append(b)
+        return None
 
     def transition(self, from_id: int, to_id: int) -> Transition | None:
         return self._edges.get(from_id, {}).get(to_id)

@@ -38,6 +38,10 @@ class OdometryChain:
         self._P[4, 4] = noise.heading_drift_sigma_rad_per_m ** 2
         self.distance_m = 0.0
         self.broken_by: str | None = None  # why no transition is measured any more
+        # Why its transition is held until the map can check it (design §6): a loss
+        # where the view contradicted the estimate (the robot may have been carried,
+        # which odometry cannot see), or a search that found no known place.
+        self.doubted_by: str | None = None
 
     @property
     def broken(self) -> bool:
@@ -47,6 +51,11 @@ class OdometryChain:
         """No transition is measured across what happened (the first reason is kept)."""
         if self.broken_by is None:
             self.broken_by = why
+
+    def doubt(self, why: str) -> None:
+        """What it measures may be wrong, or not (the first reason is kept)."""
+        if self.doubted_by is None:
+            self.doubted_by = why
 
     @property
     def last(self) -> Odometry:
@@ -94,3 +103,14 @@ class OdometryChain:
         last = SE2(self._last.x, self._last.y, self._last.yaw)
         residual = last.between(SE2(sample.x, sample.y, sample.yaw))
         return UncertainSE2(self._pose.compose(residual), self._P[:3, :3].copy())
+
+
+def held_verdict(held: UncertainSE2, path: UncertainSE2 | None) -> bool | None:
+    """Whether a transition measured by doubted odometry (``OdometryChain.doubted_by``)
+    is what the robot drove (design §6): None while no path through the map joins its
+    two places, then whether the path's T_a_b and the odometry's can be one pose (χ² at
+    99.9 %; a robot carried metres off, as the kidnaps of the endurance experiment,
+    disagrees by far more than a lap's covariance)."""
+    if path is None:
+        return None
+    return held.agrees_with(path)

@@ -22,7 +22,7 @@ from daemon.mapping.backgrounds import views_of
 from daemon.mapping.embedding import embed
 from daemon.mapping.graph import TopologicalMap
 from daemon.mapping.lookalikes import MappedPlace, likeliest, lookalikes, pair_features
-from daemon.mapping.odometry_chain import OdometryChain
+from daemon.mapping.odometry_chain import OdometryChain, held_verdict
 from daemon.mapping.place import Place, with_cues
 from daemon.mapping.settings import OdometryNoiseSettings
 from daemon.mapping.transition import Transition, TransitionSource
@@ -104,6 +104,11 @@ class Mapper:
         self._last_place: int | None = None  # learned in this run of odometry
         self._chain: OdometryChain | None = None  # from that place's reference pose
         self._pending: OdometryChain | None = None  # from the reference of a place in work
+        # Odometry transitions measured across a doubt (odometry_doubted), each waiting
+        # for a path through the map between its places to check it; the place in work's
+        # own, until it is stored. Kept in memory: a restart breaks the odometry anyway.
+        self._held: list[Transition] = []
+        self._held_pending: Link | None = None
         self._recent: collections.deque[Odometry] = collections.deque(maxlen=500)
         self.reembed()
 
@@ -141,16 +146,18 @@ class Mapper:
                 if chain is not None:
                     chain.break_off("the base was opened again")
 
-    def odometry_doubted(self) -> None:
-        """Tracking was lost: the robot may have been carried off, which odometry cannot
-        see, so the run of odometry from the last place learned measures no transition any
-        more (office 2: the next place linked to it by 4.7 m of odometry across a kidnap
-        put a place 9.8 m off, and the tracker switched there). A place being learned
-        keeps its own run: its job watches the robot."""
+    def odometry_doubted(self, why: str = "tracking was lost, the view contradicting the "
+                                          "estimate") -> None:
+        """The robot may have been carried off, which odometry cannot see: the run of
+        odometry from the last place learned is held, not trusted (office 2: the next
+        place linked to it by 4.7 m of odometry across a kidnap put a place 9.8 m off,
+        and the tracker switched there). A place learned before the run ends gets its
+        odometry transition only once a path through the map checks it
+        (:meth:`_settle_held`). A place being learned keeps its own run: its job
+        watches the robot."""
         with self._lock:
             if self._chain is not None:
-                self._chain.break_off("tracking was lost, the view contradicting the "
-                                      "estimate")
+                self._chain.doubt(why)
 
     # ------------------------------------------------------------ learning
     def begin_place(self, reference: Odometry, seen: Seen | None = None) -> list[Link]:
@@ -170,14 +177,21 @@ class Mapper:
             chain, last = self._chain, self._last_place
             odometry = None if chain is None or last is None or chain.broken \
                 or last not in self.graph else Link(last, chain.relative_at(reference))
+            self._held_pending = None
+            if odometry is not None and chain is not None and chain.doubted_by is not None:
+                self._held_pending, odometry = odometry, None
             if seen is None or seen[0] not in self.graph:
                 if odometry is None and last is not None and last in self.graph:
-                    # Joined to the map only when a cycle is later closed to it; the
-                    # localiser reaches it meanwhile as it reaches an unjoined place.
+                    # Joined to the map only when a cycle is later closed to it (which
+                    # checks the held odometry too); the localiser reaches it meanwhile
+                    # as it reaches an unjoined place.
+                    why = "no odometry run"
+                    if chain is not None:
+                        why = chain.broken_by or (
+                            f"{chain.doubted_by}: its odometry held until the map checks it"
+                            if chain.doubted_by else why)
                     log.warning("place being learned: no transition from place %d (%s) and "
-                                "no reliable estimate to join it by yet", last,
-                                chain.broken_by if chain is not None and chain.broken_by
-                                else "no odometry run")
+                                "no reliable estimate to join it by yet", last, why)
                 return [] if odometry is None else [odometry]
             if odometry is None:
                 return [Link(seen[0], seen[1], "vision")]
@@ -214,7 +228,7 @@ class Mapper:
 
     def cancel_place(self) -> None:
         with self._lock:
-            self._pending = None
+            self._pending = self._held_pending = None
 
     def add_place(self, place: Place, links: list[Link], seen_at_end: Seen | None = None
                   ) -> tuple[Place, list[Transition]]:
@@ -237,8 +251,13 @@ class Mapper:
                 t = Transition(link.from_id, stored.id, link.T_from_new, link.source)
                 self.graph.add_transition(t)
                 added.extend(t.both_ways())
+            held = self._held_pending
+            if held is not None and held.from_id in self.graph:
+                self._held.append(Transition(held.from_id, stored.id, held.T_from_new))
+            self._held_pending = None
             self._last_place, self._chain, self._pending = stored.id, self._pending, None
             self.segment_of = self.graph.segments()
+            added += self._settle_held()
         self.reembed()
         return stored, added
 
@@ -394,14 +413,51 @@ class Mapper:
                 self._references.popitem(last=False)
         return grey
 
-    def add_transition(self, transition: Transition) -> None:
+    def add_transition(self, transition: Transition) -> list[Transition]:
         """A transition measured while localising (a closed cycle, §7.1.3), both ways; the
-        `map` frame is optimised again over it."""
+        `map` frame is optimised again over it. Returns the held odometry transitions
+        the new path confirmed (:meth:`_settle_held`), both ways."""
         with self._lock:
             self.store.add_transition(transition)
             self.graph.add_transition(transition)
             self.segment_of = self.graph.segments()
+            confirmed = self._settle_held()
         self.reembed()
+        return confirmed
+
+    def _settle_held(self) -> list[Transition]:
+        """Each held odometry transition (odometry_doubted) whose places a path through
+        the map now joins: stored when the path agrees with it (the robot was not
+        carried: a false loss at the edge of a place's view, as on the ROS 2 robot's
+        cyclic tour, no longer leaves a cycle open), dropped when it does not (it was).
+        One confirmed may join places another waits for: repeated until none settles.
+        Returns those stored, both ways. Called with the lock held."""
+        stored: list[Transition] = []
+        settled = True
+        while settled:
+            settled = False
+            for held in list(self._held):
+                a, b = held.from_id, held.to_id
+                if a not in self.graph or b not in self.graph \
+                        or self.graph.transition(a, b) is not None:
+                    self._held.remove(held)  # measured otherwise since
+                    continue
+                verdict = held_verdict(held.T_from_to, self.graph.path(a, b))
+                if verdict is None:
+                    continue
+                self._held.remove(held)
+                settled = True
+                if not verdict:
+                    log.warning("held odometry %d -> %d refused: it disagrees with the map "
+                                "(the robot was carried)", a, b)
+                    continue
+                self.store.add_transition(held)
+                self.graph.add_transition(held)
+                stored.extend(held.both_ways())
+                log.info("held odometry %d -> %d confirmed by the map's path and stored",
+                         a, b)
+            self.segment_of = self.graph.segments()
+        return stored
 
     def drawn(self) -> tuple[dict[int, tuple[SE2, str]], list[tuple[int, int]]]:
         """What a map view draws: the places embedded in the `map` frame with their

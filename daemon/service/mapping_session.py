@@ -78,6 +78,14 @@ def segment_events(new_place: int | None, before: dict[int, int], after: dict[in
     return events
 
 
+def _held_events(confirmed: list[Transition]) -> list[Event]:
+    """One `transition_added` a held odometry transition the map confirmed (both ways
+    given, each announced once)."""
+    return [("transition_added", {"source": "odometry", "held": True, "from": t.from_id,
+                                  "to": t.to_id})
+            for t in confirmed[::2]]
+
+
 class MappingSession:
     """The map's owner (module docstring). ``mode`` may change while it runs (cmd/mode)."""
 
@@ -156,17 +164,18 @@ class MappingSession:
         with self._lock:
             before = dict(self.mapper.segment_of)
             try:
-                self.mapper.add_transition(transition)
+                confirmed = self.mapper.add_transition(transition)
             except (PlacecellError, KeyError) as e:
                 log.error("could not store the cycle's transition: %s", e)
                 return []
-            self.holder.replace(lambda m: m.with_transitions([transition]))
+            self.holder.replace(lambda m: m.with_transitions([transition, *confirmed]))
             after = dict(self.mapper.segment_of)
         m = transition.T_from_to.mean
         ends = {"from": transition.from_id, "to": transition.to_id}
         return [*segment_events(None, before, after, ends),
                 ("transition_added", {"source": "cycle", "x": round(m.x, 4),
-                                      "y": round(m.y, 4), "yaw": round(m.yaw, 5), **ends})]
+                                      "y": round(m.y, 4), "yaw": round(m.yaw, 5), **ends}),
+                *_held_events(confirmed)]
 
     def site_tie(self) -> tuple[str, SE2] | None:
         """The map frame's pose in a site's map (its frame name), if tied (design §11)."""
@@ -201,11 +210,11 @@ class MappingSession:
             return "the first one"
         if not lost_in_unmapped_space:
             return None
-        # A segment of its own: no odometry link to the last place (the robot may have
-        # been carried), none from an estimate.
+        # A segment of its own: the odometry from the last place held until the map can
+        # check it (the robot may have been carried), no link from an estimate.
         why = (f"unmapped space: no known place found in {self.unmapped.frames} frames "
                f"over {self.unmapped.travelled_m:.2f} m; a new segment")
-        self.mapper.odometry_restarted()
+        self.mapper.odometry_doubted("no known place found")
         return why
 
     def learning_started(self) -> None:
@@ -249,5 +258,7 @@ class MappingSession:
         events += [("transition_added", {"source": t.source, "from": t.from_id,
                                          "to": t.to_id})
                    for t in transitions if t.from_id == stored.id]
+        events += _held_events([t for t in transitions if stored.id not in
+                                (t.from_id, t.to_id)])
         return Learned(stored, transitions, [p.b_id for p in pairs], events)
 
