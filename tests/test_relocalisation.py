@@ -152,8 +152,9 @@ def test_a_loss_contradicts_odometry_only_after_the_robot_was_found_and_not_blin
 
 def test_a_loss_of_a_tracker_started_from_a_guess_is_no_evidence_of_a_kidnap() -> None:
     """Coming round a loop, the tracker starts over at the place's reference (a guess):
-    lost before it ever found the robot, the guess was wrong; once found, a loss again
-    says the robot may have been carried off."""
+    lost before it ever found the robot for reliable_frames frames in a row, the guess
+    was wrong — also when a neighbour switch carried the guess on; once found, a loss
+    again says the robot may have been carried off."""
     places = [1, 2]
     machine = Relocalisation(S)
     machine.told(0, 0, None)
@@ -162,9 +163,16 @@ def test_a_loss_of_a_tracker_started_from_a_guess_is_no_evidence_of_a_kidnap() -
     [lost] = [e for e in _frames(machine, t, S.loss_frames, 0.01, False, places, 2, 1) if e]
     assert lost.kind == "lost" and not lost.contradicted
     machine.told(0, 10, None)  # tracked again (the operator)
+    assert not machine.guessing
     machine.switched(guessed=True)
-    _frames(machine, t, 1, 0.6, True, places, 2, 11)  # found: the guess held
-    [lost] = [e for e in _frames(machine, t, S.loss_frames, 0.01, False, places, 2, 12) if e]
+    _frames(machine, t, S.reliable_frames - 1, 0.6, True, places, 2, 11)
+    machine.switched()  # on to a neighbour, the guess carried over the transition
+    assert machine.guessing
+    _frames(machine, t, S.reliable_frames - 1, 0.6, True, places, 1, 30)
+    assert machine.guessing  # found, but not yet for reliable_frames in a row
+    _frames(machine, t, 1, 0.6, True, places, 1, 40)
+    assert not machine.guessing  # the guess held
+    [lost] = [e for e in _frames(machine, t, S.loss_frames, 0.01, False, places, 1, 41) if e]
     assert lost.contradicted
     machine.told(0, 20, None)
     machine.switched()  # the estimate carried over a transition: no guess

@@ -273,9 +273,11 @@ class Localiser:
         """(place, T_place_robot) when the current estimate is reliable (σ_xy and
         confidence as for closing a cycle), else None. Safe to call from another thread."""
         tracker = self.tracker
-        if tracker is None or tracker.estimate is None or self.mode != "track":
-            return None  # not while lost, before a relocalisation is confirmed, or while
-            # the sensor output is low (a robot carried off keeps a tight covariance)
+        if tracker is None or tracker.estimate is None or self.mode != "track" \
+                or self.reloc.guessing:
+            return None  # not while lost, before a relocalisation is confirmed, while
+            # the sensor output is low (a robot carried off keeps a tight covariance), or
+            # while a tracker started from a guess has not yet found the robot
         est = tracker.estimate
         if not reliable(est.covariance, tracker.confidence, self.settings):
             return None

@@ -142,8 +142,10 @@ class Relocalisation:
         self.ambiguous_frames = 0  # the search's pick ambiguous this many frames in a row
         # The tracker was started from a guess (a place entered with no transition from
         # the last: its reference, the orientation from the bearings) and has not found
-        # the robot yet: a loss now says the guess was wrong, not that the robot moved.
+        # the robot yet: a loss now says the guess was wrong, not that the robot moved,
+        # and its estimate joins no place to the map (Localiser.reliable_estimate).
         self.guessing = False
+        self.found_frames = 0  # frames in a row with the estimate found
 
     # -------------------------------------------------------------- transitions
     def begin_search(self, stamp_ns: int, frame: int, rejected: set[int] | None = None,
@@ -174,6 +176,7 @@ class Relocalisation:
         came (``resumed``), to be confirmed as a global pick is."""
         self.loss.reset()
         self.search.reset(None)
+        self.guessing = False
         if confirm is not None:
             self.mode, self.mode_frames, self.confirming = "confirm", 0, confirm
             self.episode = (stamp_ns, frame)
@@ -182,9 +185,14 @@ class Relocalisation:
 
     def switched(self, guessed: bool = False) -> None:
         """Tracking passed to another place: its own evidence from here on. ``guessed``:
-        the new tracker starts from a guess rather than the estimate carried over."""
+        the new tracker starts from a guess rather than the estimate carried over; an
+        estimate carried over from a guess is still one (cyclic over ROS 2, notes of
+        2026-12-06: a switch coming round the loop guessed place 2, a neighbour switch
+        carried that to place 1 half a second later, and a place learned then was
+        joined to place 1 by it, the lap's cycle never closed)."""
         self.loss.reset()
-        self.guessing = guessed
+        self.guessing = guessed or self.guessing
+        self.found_frames = 0
 
     def _relocalised(self, place_id: int, how: str, stamp_ns: int, frame: int
                      ) -> LocalisationEvent:
@@ -233,7 +241,10 @@ class Relocalisation:
         s = self.settings
         lost_now = self.loss.observe(support, travelled_m)
         self.mode_frames += 1
-        if found:
+        # A guess holds once the estimate is found for reliable_frames frames in a row,
+        # as a cycle's transition is measured (§7.1.3): one frame can fit a wrong mode.
+        self.found_frames = self.found_frames + 1 if found else 0
+        if self.found_frames >= s.reliable_frames:
             self.guessing = False
         scored: list[PlaceScore] = []
         if self.mode != "confirm" and (self.loss.suspicious or self.mode == "recover"):
