@@ -93,16 +93,24 @@ def find_feature(own: list[np.ndarray], other: list[np.ndarray], margin: int) ->
     for size in SIZES:
         for col, row in _textured_candidates(reference, size):
             template = np.ascontiguousarray(reference[row:row + size, col:col + size])
-            # Its worst match in its own place's other views first (small windows), then
-            # the other place's views one by one (the wrap margin lets a match straddle
-            # the seam) until it cannot beat the best: an other_ncc of at least
+            # Out as soon as it cannot beat the best: an other_ncc of at least
             # own_ncc - best.score. Exact: what is dropped would not have been chosen.
-            own_ncc = min((_near(v, margin, template, col, row) for v in own[1:]),
-                          default=1.0)
+            # A match found near each of the other place's views' coarse peak is one
+            # the patch has there, so at least that good anywhere: most candidates are
+            # out on that alone, before their own views are searched — own_ncc is at
+            # most 1, and only falls as each own view is searched (the wrap margin lets
+            # a match straddle the seam).
+            peaks = _Peaks(others, template)
+            if best is not None and peaks.reach(1.0 - best.score):
+                continue
+            own_ncc, out = 1.0, False
+            for view in own[1:]:
+                own_ncc = min(own_ncc, _near(view, margin, template, col, row))
+                if best is not None and peaks.known >= own_ncc - best.score:
+                    out = True
+                    break
             out_at = math.inf if best is None else own_ncc - best.score
-            # A match found near each view's coarse peak is one the patch has there, so
-            # at least that good anywhere: most candidates are out on that alone.
-            if any(v.ncc_near_coarse_peak(template) >= out_at for v in others):
+            if out or (best is not None and peaks.reach(out_at)):
                 continue
             other_ncc = -1.0
             for v in others:
@@ -177,6 +185,28 @@ def vote(ncc: float, feature: Feature) -> float:
         return 0.0  # the other place has it too: no evidence either way
     e = min(max((ncc - feature.other_ncc) / span, 0.0), 1.0)
     return span * (e - 0.5)
+
+
+class _Peaks:
+    """A candidate's NCC near the coarse peak in each of the other place's views
+    (:meth:`PreparedImage.ncc_near_coarse_peak`), each measured when first needed."""
+
+    def __init__(self, views: list[PreparedImage], template: np.ndarray) -> None:
+        self._views, self._template = views, template
+        self._done = 0
+        self.known = -1.0  # the highest measured so far
+
+    def reach(self, level: float) -> bool:
+        """Whether any view's peak reaches ``level``, measuring views until one does."""
+        if self.known >= level:
+            return True
+        while self._done < len(self._views):
+            self.known = max(self.known,
+                             self._views[self._done].ncc_near_coarse_peak(self._template))
+            self._done += 1
+            if self.known >= level:
+                return True
+        return False
 
 
 def _textured_candidates(core: np.ndarray, size: int) -> list[tuple[int, int]]:
