@@ -11,6 +11,12 @@ import os
 for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_name, "1")
 
+# Two malloc arenas, before any thread starts: each learn left tens of MB in arenas of
+# its own (daemon/service/memory.py, docs/design.md §13).
+from daemon.service.memory import limit_arenas  # noqa: E402 - before numpy's threads
+
+limit_arenas()
+
 import argparse  # noqa: E402 - after the thread settings above
 import logging  # noqa: E402
 import sys  # noqa: E402
