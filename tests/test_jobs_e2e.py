@@ -96,7 +96,9 @@ def test_five_operator_learns_succeed_beside_two_busy_loops(tmp_path: Path) -> N
             seen = list(watch.seen)
         finally:
             watch.close()
-    failed = [(r.returncode, r.stderr[-500:]) for r in results if r.returncode != 0]
+    # placecellctl --json says why a learn failed on stdout (its last reply).
+    failed = [(r.returncode, r.stdout[-500:], r.stderr[-500:]) for r in results
+              if r.returncode != 0]
     assert not failed, failed
     learned = [json.loads(r.stdout.splitlines()[-1])["place"]["id"] for r in results]
     assert learned == [1, 2, 3, 4, 5]
