@@ -252,7 +252,7 @@ class Mapper:
                 self.graph.add_transition(t)
                 added.extend(t.both_ways())
             held = self._held_pending
-            if held is not None and held.from_id in self.graph:
+            if held is not None:  # checked by _settle_held, now or once a path joins
                 self._held.append(Transition(held.from_id, stored.id, held.T_from_new))
             self._held_pending = None
             self._last_place, self._chain, self._pending = stored.id, self._pending, None
@@ -430,33 +430,28 @@ class Mapper:
         the map now joins: stored when the path agrees with it (the robot was not
         carried: a false loss at the edge of a place's view, as on the ROS 2 robot's
         cyclic tour, no longer leaves a cycle open), dropped when it does not (it was).
-        One confirmed may join places another waits for: repeated until none settles.
-        Returns those stored, both ways. Called with the lock held."""
+        One pass: a stored one joins places already joined, so it changes no segment and
+        lets no other held one settle. Returns those stored, both ways. Called with the
+        lock held."""
         stored: list[Transition] = []
-        settled = True
-        while settled:
-            settled = False
-            for held in list(self._held):
-                a, b = held.from_id, held.to_id
-                if a not in self.graph or b not in self.graph \
-                        or self.graph.transition(a, b) is not None:
-                    self._held.remove(held)  # measured otherwise since
-                    continue
-                verdict = held_verdict(held.T_from_to, self.graph.path(a, b))
-                if verdict is None:
-                    continue
-                self._held.remove(held)
-                settled = True
-                if not verdict:
-                    log.warning("held odometry %d -> %d refused: it disagrees with the map "
-                                "(the robot was carried)", a, b)
-                    continue
-                self.store.add_transition(held)
-                self.graph.add_transition(held)
-                stored.extend(held.both_ways())
-                log.info("held odometry %d -> %d confirmed by the map's path and stored",
-                         a, b)
-            self.segment_of = self.graph.segments()
+        for held in list(self._held):
+            a, b = held.from_id, held.to_id
+            if a not in self.graph or b not in self.graph \
+                    or self.graph.transition(a, b) is not None:
+                self._held.remove(held)  # measured otherwise since
+                continue
+            verdict = held_verdict(held.T_from_to, self.graph.path(a, b))
+            if verdict is None:
+                continue
+            self._held.remove(held)
+            if not verdict:
+                log.warning("held odometry %d -> %d refused: it disagrees with the map "
+                            "(the robot was carried)", a, b)
+                continue
+            self.store.add_transition(held)
+            self.graph.add_transition(held)
+            stored.extend(held.both_ways())
+            log.info("held odometry %d -> %d confirmed by the map's path and stored", a, b)
         return stored
 
     def drawn(self) -> tuple[dict[int, tuple[SE2, str]], list[tuple[int, int]]]:
