@@ -22,6 +22,7 @@ from daemon.vision.disambiguation import (
     choose,
     decide,
     find_feature,
+    prepared,
 )
 from tools.eval.lockstep import Run, lockstep_config
 
@@ -120,6 +121,20 @@ def test_the_new_places_feature_is_absent_from_every_look_alike_not_just_one() -
     feature = own_feature(own, [[_wrap(b)], [_wrap(c)]], M)
     assert _on(feature, *plant), (feature.col, feature.row)
     assert best_ncc(_wrap(c), feature) < 0.6 and feature.other_ncc < 0.6, feature
+
+
+def test_views_prepared_once_give_the_feature_raw_views_give() -> None:
+    """pair_features prepares the new place's views once for all its look-alikes'
+    searches: the same feature as from the grey views, and the prepared views are the
+    ones searched (nothing prepared again)."""
+    rng = np.random.default_rng(8)
+    a, b = _aliased_pair(rng)
+    own, other = [_wrap(b), _wrap(_moved(b, rng, 2))], [_wrap(a), _wrap(_moved(a, rng, 3))]
+    ready = prepared(other)
+    assert all(again is once for again, once in zip(prepared(ready), ready, strict=True))
+    raw, shared = find_feature(own, other, M), find_feature(own, ready, M)
+    assert (raw.col, raw.row, raw.size, raw.own_ncc, raw.other_ncc) == \
+        (shared.col, shared.row, shared.size, shared.own_ncc, shared.other_ncc)
 
 
 def test_the_older_places_feature_is_scored_over_its_learning_views() -> None:

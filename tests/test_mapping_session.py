@@ -64,6 +64,19 @@ def test_a_place_is_in_the_file_and_in_the_localisers_map_with_its_transitions(
     assert graph.transition(c.place.id, a) is not None and len(graph) == 3
 
 
+def test_the_mapper_matches_with_the_templates_the_localisers_map_prepared(
+        tmp_path: Path) -> None:
+    """A learn matches older places' landmarks many times (backgrounds, look-alikes):
+    with the templates the localiser's map holds, not prepared again for every learn."""
+    session = _session(tmp_path / "map.db")
+    a, b = _two_segments(session)
+    for place_id in (a, b):
+        assert session.mapper.templates(place_id) is session.known.places[place_id].templates
+    alone = Mapper(session.mapper.store, OdometryNoiseSettings())  # no session: its own
+    assert alone.templates(a) is not session.known.places[a].templates
+    assert np.array_equal(alone.templates(a).coarse, session.known.places[a].templates.coarse)
+
+
 def test_a_closed_cycle_joins_segments_in_the_file_and_the_map_read(tmp_path: Path) -> None:
     session = _session(tmp_path / "map.db")
     a, b = _two_segments(session)

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from daemon.vision.disambiguation import Feature, PairFeatures, find_feature
+from daemon.vision.disambiguation import Feature, PairFeatures, find_feature, prepared
 from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
 from daemon.vision.signature import signature, similarity
 
@@ -92,7 +92,8 @@ def pair_features(new_id: int, new_views: list[np.ndarray],
     if not lookalike_views:
         return []
     mine = own_feature(new_views, list(lookalike_views.values()), margin)
-    return [PairFeatures(new_id, other_id, mine, find_feature(views, new_views, margin))
+    against_new = prepared(new_views)  # once for every look-alike's search
+    return [PairFeatures(new_id, other_id, mine, find_feature(views, against_new, margin))
             for other_id, views in lookalike_views.items()]
 
 

@@ -14,6 +14,7 @@ import logging
 import math
 import threading
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -92,6 +93,10 @@ class Mapper:
             collections.OrderedDict()  # grey, by place id, the last used last
         self._lrps: collections.OrderedDict[tuple[int, int], float] = \
             collections.OrderedDict()  # (landmarks' place, view's place) → LRP, as above
+        # A place's templates as the localiser's map already holds them prepared (the
+        # MappingSession's KnownMap), None for a place it does not hold: not prepared
+        # twice, nor kept twice (20 kB a place).
+        self.prepared_elsewhere: Callable[[int], PreparedTemplates | None] = lambda _: None
         self.graph: TopologicalMap = store.load()
         # Each place's segment (design §6), replaced whole on every change of the map.
         self.segment_of: dict[int, int] = self.graph.segments()
@@ -307,8 +312,7 @@ class Mapper:
         map: each view's panorama is read and prepared once for all the places."""
         with self._lock:
             ids = [p.id for p in self.graph.places]
-            templates = {q: PreparedTemplates.of(self.graph.place(q).landmarks.templates())
-                         for q in place_ids}
+            templates = {q: self.templates(q) for q in place_ids}
         views = {q: views_of(q, ids) for q in place_ids}
         sums = dict.fromkeys(place_ids, 0.0)
         for v in sorted({v for vs in views.values() for v in vs}):
@@ -330,8 +334,7 @@ class Mapper:
             known = {q: self._lrps[(q, view)] for q in place_ids if (q, view) in self._lrps}
             missing = [q for q in place_ids if q not in known]
             given = prepared or {}
-            templates = [given[q] if q in given else PreparedTemplates.of(
-                self.graph.place(q).landmarks.templates()) for q in missing]
+            templates = [given[q] if q in given else self.templates(q) for q in missing]
         if missing:
             pano = PreparedPanorama.of(self.grey_reference(view))
             known.update(zip(missing, FastMatcher().lrps(pano, templates), strict=True))
@@ -376,7 +379,7 @@ class Mapper:
             candidates = [self.graph.place(pid) for pid in likeliest(
                 own_views, margin, signatures, settings.lookalike_candidates)
                 if pid in self.graph]
-        prepared = {p.id: PreparedTemplates.of(p.landmarks.templates())
+        prepared = {p.id: self.templates(p.id)
                     for p in [place, *candidates]}  # each once, for the LRPs and the test
         others = {p.id: MappedPlace(prepared[p.id], _background(p, settings.background_lrp),
                                     *self.lrps_in_view(p.id, [p.id, place_id], prepared))
@@ -397,6 +400,14 @@ class Mapper:
                      "%d px at %d", place_id, pair.b_id, pair.a.size, pair.a.col, pair.b.size,
                      pair.b.col)
         return pairs
+
+    def templates(self, place_id: int) -> PreparedTemplates:
+        """A place's landmark templates prepared for matching (prepared_elsewhere, else
+        here)."""
+        with self._lock:
+            prepared = self.prepared_elsewhere(place_id)
+            return prepared if prepared is not None else PreparedTemplates.of(
+                self.graph.place(place_id).landmarks.templates())
 
     def grey_reference(self, place_id: int) -> np.ndarray:
         """A place's reference panorama in grey, decoded once while it is among the

@@ -32,6 +32,7 @@ from daemon.mapping.transition import Transition
 from daemon.mapping.unmapped import UnmappedWatch
 from daemon.service.mapper import Link, Mapper, Seen
 from daemon.service.pipeline import holder_of
+from daemon.vision.recognition import PreparedTemplates
 from kernel.errors import PlacecellError
 from kernel.se2 import SE2
 from kernel.types import Odometry
@@ -98,7 +99,12 @@ class MappingSession:
         self._lock = threading.Lock()  # one change of the map at a time
         with mapper.lock:
             self.holder = holder_of(mapper.graph)
+        mapper.prepared_elsewhere = self._prepared
         self.unmapped = UnmappedWatch(acquisition)
+
+    def _prepared(self, place_id: int) -> PreparedTemplates | None:
+        known = self.holder.current.places.get(place_id)
+        return None if known is None else known.templates
 
     @property
     def known(self) -> KnownMap:

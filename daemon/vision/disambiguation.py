@@ -21,6 +21,7 @@ Views are grey panoramas with their wrap margin; columns and rows are of the cor
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -82,15 +83,20 @@ class Decision:
     vote: float
 
 
-def find_feature(own: list[np.ndarray], other: list[np.ndarray], margin: int) -> Feature:
+def find_feature(own: list[np.ndarray], other: Sequence[np.ndarray | PreparedImage],
+                 margin: int) -> Feature:
     """The feature of the place whose views are ``own`` (the reference first, then any
-    others of the same place) against the place whose views are ``other``."""
+    others of the same place) against the place whose views are ``other`` (grey, or
+    already prepared when the caller matches them against several places)."""
     if not own or not other:
         raise ValueError("a feature needs at least one view of each place")
     reference = core_of(own[0], margin)
-    others = [PreparedImage(v) for v in other]  # each matched by hundreds of candidates
+    others = prepared(other)  # each matched by hundreds of candidates
     best: Feature | None = None
-    for size in SIZES:
+    # The largest patches first: they win most pairs (32 px on 16 of 27 pairs of the
+    # bench's map, 16 px on none), and the sooner the best score is high the more
+    # candidates the bound below puts out (13 % less time, the same features).
+    for size in sorted(SIZES, reverse=True):
         for col, row in _textured_candidates(reference, size):
             template = np.ascontiguousarray(reference[row:row + size, col:col + size])
             # Out as soon as it cannot beat the best: an other_ncc of at least
@@ -125,6 +131,12 @@ def find_feature(own: list[np.ndarray], other: list[np.ndarray], margin: int) ->
     if best is None:
         raise ValueError("the view has no textured patch to tell it by")
     return best
+
+
+def prepared(views: Sequence[np.ndarray | PreparedImage]) -> list[PreparedImage]:
+    """Grey views prepared for many best-NCC searches (those already prepared as they
+    are)."""
+    return [v if isinstance(v, PreparedImage) else PreparedImage(v) for v in views]
 
 
 def decide(view: np.ndarray, feature_a: Feature, feature_b: Feature) -> Decision:
