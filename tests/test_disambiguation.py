@@ -5,7 +5,9 @@ daemon's pipeline, look-alikes get features when learned and the search uses the
 
 from __future__ import annotations
 
+import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import cv2
@@ -157,6 +159,36 @@ def test_the_older_places_feature_is_scored_over_its_learning_views() -> None:
     assert kept.b.own_ncc < 1.0 and _on(kept.b, 500, 56, 32), kept.b
     assert np.array_equal(alone.a.template, kept.a.template)  # A's own: B's views add
     assert kept.a.other_ncc >= alone.a.other_ncc  # places to be ruled out, never fewer
+
+
+def test_a_learns_searches_spread_over_threads_find_the_same_features_in_order() -> None:
+    """The mapper spreads a learn's searches over its matching threads ([mapping]
+    learn_threads): each look-alike's pair comes back with its own features, the same as
+    searched in turn, and the searches ran on the pool's threads."""
+    rng = np.random.default_rng(9)
+    a, b = _aliased_pair(rng)
+    c = b.copy()
+    c[56:88, 300:332] = (np.kron(rng.integers(0, 2, (8, 8)), np.ones((4, 4))) * 200 + 30
+                         ).astype(np.uint8)
+    new = [_wrap(a), _wrap(_moved(a, rng, 2))]
+    lookalikes = {1: [_wrap(b)], 2: [_wrap(c), _wrap(_moved(c, rng, 2))]}
+    threads: set[str] = set()
+
+    def over_threads(work, items):  # type: ignore[no-untyped-def]
+        def tracked(item):  # type: ignore[no-untyped-def]
+            threads.add(threading.current_thread().name)
+            return work(item)
+        with ThreadPoolExecutor(2) as pool:
+            return list(pool.map(tracked, items))
+
+    in_turn = pair_features(3, new, lookalikes, M)
+    spread = pair_features(3, new, lookalikes, M, over_threads)
+    key = [(p.a_id, p.b_id, f.col, f.row, f.size, f.own_ncc, f.other_ncc)
+           for p in in_turn for f in (p.a, p.b)]
+    assert key == [(p.a_id, p.b_id, f.col, f.row, f.size, f.own_ncc, f.other_ncc)
+                   for p in spread for f in (p.a, p.b)]
+    assert [p.b_id for p in spread] == [1, 2]
+    assert threads and threading.main_thread().name not in threads, threads
 
 
 def test_features_that_cannot_part_their_places_clearly_are_not_waited_for() -> None:

@@ -18,13 +18,26 @@ mapper stores what this returns.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 
 from daemon.vision.disambiguation import Feature, PairFeatures, find_feature, prepared
 from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
 from daemon.vision.signature import signature, similarity
+
+T = TypeVar("T")
+R = TypeVar("R")
+# Runs a function on each item, results in the items' order: in turn, or over threads
+# (the mapper's Mapper.spread).
+Spread = Callable[[Callable[[T], R], Sequence[T]], list[R]]
+
+
+def _each(work: Callable[[T], R], items: Sequence[T]) -> list[R]:
+    return [work(item) for item in items]
 
 
 @dataclass(frozen=True)
@@ -57,17 +70,18 @@ def likeliest(views: list[np.ndarray], margin: int, signatures: dict[int, np.nda
 
 
 def lookalikes(views: list[np.ndarray], own: PreparedTemplates, own_background: float,
-               others: dict[int, MappedPlace], margin: float, limit: int) -> list[int]:
+               others: dict[int, MappedPlace], margin: float, limit: int,
+               spread: Spread = _each) -> list[int]:
     """The places of ``others`` that the lower level tells from the new place (``own``,
     seen in the grey ``views``) by at most ``margin`` either way, at most ``limit``, the
-    closest first."""
+    closest first. ``spread``: how the views' matching is run (in turn, or over threads;
+    the same answer)."""
     if not others:
         return []
     matcher = FastMatcher()
-    prepared = [PreparedPanorama.of(v) for v in views]
     ids = list(others)
-    lrps = np.array([matcher.lrps(p, [own] + [others[i].templates for i in ids])
-                     for p in prepared])
+    templates = [own] + [others[i].templates for i in ids]
+    lrps = np.array(spread(lambda v: matcher.lrps(PreparedPanorama.of(v), templates), views))
     leads = lrps.mean(axis=0) - np.array([own_background] + [others[i].background
                                                              for i in ids])
     gap = leads[0] - leads[1:]  # how far each old place stands below the new one here
@@ -79,8 +93,8 @@ def lookalikes(views: list[np.ndarray], own: PreparedTemplates, own_background: 
 
 
 def pair_features(new_id: int, new_views: list[np.ndarray],
-                  lookalike_views: dict[int, list[np.ndarray]], margin: int
-                  ) -> list[PairFeatures]:
+                  lookalike_views: dict[int, list[np.ndarray]], margin: int,
+                  spread: Spread = _each) -> list[PairFeatures]:
     """The features of the new place (views: its reference first) and each look-alike
     (id → its grey views, the reference first, then its learning views if the map kept
     them): the new place's one feature (:func:`own_feature`), and each look-alike's
@@ -91,10 +105,14 @@ def pair_features(new_id: int, new_views: list[np.ndarray],
     named the newest place on 3 of 32 ambiguous frames where it was 4-5 m away."""
     if not lookalike_views:
         return []
-    mine = own_feature(new_views, list(lookalike_views.values()), margin)
     against_new = prepared(new_views)  # once for every look-alike's search
-    return [PairFeatures(new_id, other_id, mine, find_feature(views, against_new, margin))
-            for other_id, views in lookalike_views.items()]
+    searches: list[Callable[[], Feature]] = [
+        lambda: own_feature(new_views, list(lookalike_views.values()), margin),
+        *[functools.partial(find_feature, views, against_new, margin)
+          for views in lookalike_views.values()]]
+    mine, *theirs = spread(lambda search: search(), searches)
+    return [PairFeatures(new_id, other_id, mine, feature)
+            for other_id, feature in zip(lookalike_views, theirs, strict=True)]
 
 
 def own_feature(new_views: list[np.ndarray], lookalike_views: list[list[np.ndarray]],

@@ -89,6 +89,9 @@ class MappingSettings:
     mode: Literal["mapping", "localisation"] = setting(
         "mapping", doc="mapping: places may be learned; localisation: the map is read-only")
     acquisition: AcquisitionSettings = setting(default_factory=lambda: AcquisitionSettings())
+    learn_threads: int = setting(2, ge=1, le=64, doc="threads a learn's matching after the "
+                                 "drive (backgrounds, look-alikes, their features) is spread "
+                                 "over; 1: the learn's own thread alone (the same result)")
 
 
 @dataclass(frozen=True)

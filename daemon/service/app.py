@@ -82,7 +82,7 @@ class Daemon:
         self.map = opened.store
         self.map_readonly_reason = opened.readonly_reason
         try:
-            self.mapper = Mapper(self.map, config.odometry)
+            self.mapper = Mapper(self.map, config.odometry, config.mapping.learn_threads)
         except BaseException:
             self.map.close()
             raise

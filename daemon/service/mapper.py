@@ -9,12 +9,14 @@ from zenoh's threads. A place is stored with its transition in one transaction
 from __future__ import annotations
 
 import collections
+import concurrent.futures
 import dataclasses
 import logging
 import math
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from typing import TypeVar
 
 import numpy as np
 
@@ -36,6 +38,8 @@ from kernel.se2 import SE2, UncertainSE2
 from kernel.types import Odometry
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
+R = TypeVar("R")
 
 
 def _background(place: Place, default: float) -> float:
@@ -85,9 +89,12 @@ def _closing(seen: Seen) -> list[Link]:
 
 
 class Mapper:
-    def __init__(self, store: MapStore, noise: OdometryNoiseSettings) -> None:
+    def __init__(self, store: MapStore, noise: OdometryNoiseSettings, threads: int = 1) -> None:
+        """``threads``: how many threads a learn's matching is spread over (spread)."""
         self.store = store
         self.noise = noise
+        self._pool = None if threads <= 1 else concurrent.futures.ThreadPoolExecutor(
+            threads, thread_name_prefix="placecell-match")
         self._lock = threading.RLock()
         self._references: collections.OrderedDict[int, np.ndarray] = \
             collections.OrderedDict()  # grey, by place id, the last used last
@@ -315,9 +322,11 @@ class Mapper:
             templates = {q: self.templates(q) for q in place_ids}
         views = {q: views_of(q, ids) for q in place_ids}
         sums = dict.fromkeys(place_ids, 0.0)
-        for v in sorted({v for vs in views.values() for v in vs}):
-            users = [q for q in place_ids if v in views[q]]
-            for q, lrp in zip(users, self.lrps_in_view(v, users, templates), strict=True):
+        seen_in = sorted({v for vs in views.values() for v in vs})
+        users = {v: [q for q in place_ids if v in views[q]] for v in seen_in}
+        measured = self.spread(lambda v: self.lrps_in_view(v, users[v], templates), seen_in)
+        for v, lrps in zip(seen_in, measured, strict=True):  # summed in view order
+            for q, lrp in zip(users[v], lrps, strict=True):
                 sums[q] += lrp
         return self._keep_cross_backgrounds(
             {q: sums[q] / len(views[q]) for q in place_ids if views[q]})
@@ -381,17 +390,18 @@ class Mapper:
                 if pid in self.graph]
         prepared = {p.id: self.templates(p.id)
                     for p in [place, *candidates]}  # each once, for the LRPs and the test
+        at_home = self.spread(lambda p: self.lrps_in_view(p.id, [p.id, place_id], prepared),
+                              candidates)
         others = {p.id: MappedPlace(prepared[p.id], _background(p, settings.background_lrp),
-                                    *self.lrps_in_view(p.id, [p.id, place_id], prepared))
-                  for p in candidates}
+                                    *lrps) for p, lrps in zip(candidates, at_home, strict=True)}
         found = lookalikes(own_views, prepared[place_id],
                            _background(place, settings.background_lrp), others,
                            settings.lookalike_margin,
-                           settings.max_lookalikes)
+                           settings.max_lookalikes, self.spread)
         self.store.put_views(place_id, views)
         pairs = pair_features(place_id, own_views,
                               {o: [self.grey_reference(o), *self.store.views(o)] for o in found},
-                              margin)
+                              margin, self.spread)
         for pair in pairs:
             with self._lock:
                 self.store.put_features(pair)
@@ -400,6 +410,15 @@ class Mapper:
                      "%d px at %d", place_id, pair.b_id, pair.a.size, pair.a.col, pair.b.size,
                      pair.b.col)
         return pairs
+
+    def spread(self, work: Callable[[T], R], items: Sequence[T]) -> list[R]:
+        """``work`` on each item, over the learn's matching threads (``threads``; the
+        caller's alone with one), results in the items' order. A learn's matching after
+        the drive is many independent searches — views, candidates, look-alikes — whose
+        OpenCV, numpy and numba inner loops release the GIL."""
+        if self._pool is None or len(items) < 2:
+            return [work(item) for item in items]
+        return list(self._pool.map(work, items))
 
     def templates(self, place_id: int) -> PreparedTemplates:
         """A place's landmark templates prepared for matching (prepared_elsewhere, else

@@ -157,7 +157,7 @@ class Run:
         self._tmp = tempfile.TemporaryDirectory()
         self.store = MapStore.open(map_path or Path(self._tmp.name) / "map.db",
                                    geometry_checksum(cfg.projection, cfg.panorama))
-        self.mapper = Mapper(self.store, cfg.odometry)
+        self.mapper = Mapper(self.store, cfg.odometry, cfg.mapping.learn_threads)
         self.session = MappingSession(self.mapper, cfg.mapping.acquisition, cfg.localisation)
         self.localiser = Localiser(cfg.projection, cfg.panorama, settings=cfg.localisation,
                                    odometry_noise=cfg.odometry, known_map=self.session.holder,
@@ -251,7 +251,8 @@ class Run:
         """The daemon stopped and started again on the same map file: a new Mapper,
         MappingSession and Localiser (with ``acquisition`` on, as the daemon runs it),
         resumed from ``saved`` (the pose saved at the stop) as the daemon resumes."""
-        self.mapper = Mapper(self.store, self.cfg.odometry)
+        self.mapper = Mapper(self.store, self.cfg.odometry,
+                             self.cfg.mapping.learn_threads)
         self.session = MappingSession(self.mapper, self.cfg.mapping.acquisition,
                                       self.cfg.localisation)
         with self.mapper.lock:

@@ -180,7 +180,7 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
     camera, base, robot = _devices(cfg, scenario)
     acq = dataclasses.replace(cfg.mapping.acquisition, enabled=True)
     store = MapStore.open(map_path, geometry_checksum(cfg.projection, cfg.panorama))
-    mapper = Mapper(store, cfg.odometry)
+    mapper = Mapper(store, cfg.odometry, cfg.mapping.learn_threads)
     session = MappingSession(mapper, acq, cfg.localisation)
     localiser = Localiser(cfg.projection, cfg.panorama, acquisition=acq,
                           known_map=session.holder, mount=cfg.mount)
