@@ -64,6 +64,23 @@ class ZenohSettings:
 
 
 @dataclass(frozen=True)
+class FleetSettings:
+    enabled: bool = setting(False, doc="share places with the other robots of a fleet through "
+                            "its routers' storage (docs/fleet.md; [zenoh] connect to one)")
+    key_prefix: str = setting("placecell/fleet", doc="the fleet's key space: each robot puts "
+                              "its places under <key_prefix>/<robot name>/")
+    fetch_timeout_s: float = setting(10.0, gt=0.0, le=600.0, doc="at start, wait this long "
+                                     "for the fleet's storage to answer before the robot "
+                                     "acts on its own map")
+
+    def __post_init__(self) -> None:
+        chunks = self.key_prefix.split("/")
+        if not all(c and not set(c) & set("*$?#") for c in chunks):
+            raise ValueError(f"fleet.key_prefix {self.key_prefix!r} must be zenoh key "
+                             "chunks (no empty chunk, no *, $, ? or #)")
+
+
+@dataclass(frozen=True)
 class Ros2Settings:
     enabled: bool = setting(False, doc="publish the pose for ROS 2 nodes over rmw_zenoh "
                            "(daemon/service/ros2.py)")
@@ -170,6 +187,7 @@ class PlacecellConfig:
     localisation: LocalisationSettings = setting(default_factory=LocalisationSettings)
     zenoh: ZenohSettings = setting(default_factory=ZenohSettings)
     ros2: Ros2Settings = setting(default_factory=Ros2Settings)
+    fleet: FleetSettings = setting(default_factory=FleetSettings)
     foxglove: FoxgloveSettings = setting(default_factory=FoxgloveSettings)
     map: MapSettings = setting(default_factory=MapSettings)
     service: ServiceSettings = setting(default_factory=ServiceSettings)

@@ -183,6 +183,7 @@ def test_version_2_map_keeps_its_places_and_gains_background_estimates(tmp_path:
     db.execute("DROP TABLE features")
     db.execute("DROP TABLE floor")
     db.execute("DROP TABLE views")
+    db.execute("DROP TABLE origins")
     db.execute("UPDATE meta SET value = '2' WHERE key = 'schema_version'")
     db.commit()
     db.close()
@@ -398,6 +399,7 @@ def test_version_4_map_gains_the_features_table_and_keeps_the_rest(tmp_path: Pat
     db.execute("DROP TABLE floor")
     db.execute("ALTER TABLE places DROP COLUMN background_cross")
     db.execute("DROP TABLE views")
+    db.execute("DROP TABLE origins")
     db.execute("UPDATE meta SET value = '4' WHERE key = 'schema_version'")
     db.commit()
     db.close()
@@ -405,7 +407,7 @@ def test_version_4_map_gains_the_features_table_and_keeps_the_rest(tmp_path: Pat
     fa = Feature(40, 8, rng.integers(0, 256, (24, 24)).astype(np.uint8), 0.95, 0.31)
     fb = Feature(600, 16, rng.integers(0, 256, (16, 16)).astype(np.uint8), 0.9, 0.42)
     with MapStore.open(path, GEOMETRY) as store:
-        assert store.meta("schema_version") == str(SCHEMA_VERSION) == "8"
+        assert store.meta("schema_version") == str(SCHEMA_VERSION) == "9"
         assert [p.label for p in store.load().places] == ["dock", "door"]
         assert store.transition_count() == 2 and store.saved_pose() is not None
         assert store.features() == []
@@ -427,13 +429,14 @@ def test_the_floor_model_is_kept_with_the_map_and_a_damaged_one_named(tmp_path: 
     db.execute("DROP TABLE floor")
     db.execute("ALTER TABLE places DROP COLUMN background_cross")
     db.execute("DROP TABLE views")
+    db.execute("DROP TABLE origins")
     db.execute("UPDATE meta SET value = '5' WHERE key = 'schema_version'")
     db.commit()
     db.close()
     histogram = np.zeros((256, 256), np.uint8)
     histogram[80, 90] = 255
     with MapStore.open(path, GEOMETRY) as store:
-        assert store.meta("schema_version") == "8" and store.floor() is None
+        assert store.meta("schema_version") == "9" and store.floor() is None
         store.save_floor(FloorModel(ColourModel(histogram), 0.2), 10.0)
         store.save_floor(FloorModel(ColourModel(histogram), 0.3), 20.0)
     with MapStore.open(path, GEOMETRY) as store:
@@ -458,11 +461,12 @@ def test_version_6_map_gains_the_backgrounds_in_the_other_places_views(tmp_path:
     db = sqlite3.connect(path)
     db.execute("ALTER TABLE places DROP COLUMN background_cross")
     db.execute("DROP TABLE views")
+    db.execute("DROP TABLE origins")
     db.execute("UPDATE meta SET value = '6' WHERE key = 'schema_version'")
     db.commit()
     db.close()
     with MapStore.open(path, GEOMETRY) as store:
-        assert store.meta("schema_version") == "8"
+        assert store.meta("schema_version") == "9"
         assert [p.background_cross for p in store.load().places] == [None, None]
     with MapStore.open(path, GEOMETRY, readonly=True) as store:
         Mapper(store, OdometryNoiseSettings())
@@ -474,6 +478,34 @@ def test_version_6_map_gains_the_backgrounds_in_the_other_places_views(tmp_path:
         assert [p.background_cross for p in mapper.graph.places] == stored
 
 
+def test_version_8_map_gains_the_fleets_origins_and_a_place_is_taken_once(
+        tmp_path: Path) -> None:
+    """Schema 9 (docs/fleet.md): the places taken from other robots, each by the robot
+    that learned it and its id there; a version 8 file gains the empty table (all its
+    places its own). A place taken is stored whole, under this map's next id, with its
+    learning views; the same robot's place again is refused and changes nothing."""
+    path = tmp_path / "v8.db"
+    _two_places(path).close()
+    db = sqlite3.connect(path)
+    db.execute("DROP TABLE origins")
+    db.execute("UPDATE meta SET value = '8' WHERE key = 'schema_version'")
+    db.commit()
+    db.close()
+    rng = np.random.default_rng(4)
+    views = [rng.integers(0, 256, (24, 80)).astype(np.uint8) for _ in range(2)]
+    with MapStore.open(path, GEOMETRY) as store:
+        assert store.meta("schema_version") == "9" and store.origins() == {}
+        theirs = store.place(1, panorama=True)
+        taken = store.adopt_place(theirs, views, "robot-b", 7)
+        assert taken.id == 3 and store.origins() == {3: ("robot-b", 7)}
+        with pytest.raises(MapStoreError, match="place 7 of robot 'robot-b' is in the map"):
+            store.adopt_place(theirs, views, "robot-b", 7)
+    with MapStore.open(path, GEOMETRY, readonly=True) as store:
+        assert store.place_count() == 3 and store.origins() == {3: ("robot-b", 7)}
+        assert all(np.array_equal(a, b) for a, b in zip(store.views(3), views, strict=True))
+        assert store.place(3).landmarks.width == store.place(1).landmarks.width
+
+
 def test_version_7_map_gains_the_learning_views_and_a_damaged_one_is_named(
         tmp_path: Path) -> None:
     """Schema 8 (design §5): each place's learning views (grey, with their wrap margin),
@@ -483,13 +515,14 @@ def test_version_7_map_gains_the_learning_views_and_a_damaged_one_is_named(
     _two_places(path).close()
     db = sqlite3.connect(path)
     db.execute("DROP TABLE views")
+    db.execute("DROP TABLE origins")
     db.execute("UPDATE meta SET value = '7' WHERE key = 'schema_version'")
     db.commit()
     db.close()
     rng = np.random.default_rng(3)
     views = [rng.integers(0, 256, (24, 80)).astype(np.uint8) for _ in range(4)]
     with MapStore.open(path, GEOMETRY) as store:
-        assert store.meta("schema_version") == "8" and store.views(1) == []
+        assert store.meta("schema_version") == "9" and store.views(1) == []
         store.put_views(1, views[:2])
         store.put_views(1, views)  # replaced whole, not added to
     with MapStore.open(path, GEOMETRY, readonly=True) as store:

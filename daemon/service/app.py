@@ -29,6 +29,7 @@ from daemon.service.components import (
     base_component,
     camera_component,
 )
+from daemon.service.fleet import FleetLink
 from daemon.service.foxglove_view import FoxgloveView
 from daemon.service.learn_job import (
     BaseCommands,
@@ -50,6 +51,7 @@ from daemon.store.sqlite_store import SavedPose
 from daemon.vision.unwarp import Unwarper
 from hal.registry import HalContext, create_base, create_camera
 from kernel.errors import PlacecellError
+from kernel.panorama import geometry_checksum
 from kernel.se2 import SE2, turned_covariance
 
 log = logging.getLogger(__name__)
@@ -72,6 +74,7 @@ class Daemon:
         self._access: access.AccessWatch | None = None
         self._link_listener: Any = None
         self._view: FoxgloveView | None = None
+        self._fleet: FleetLink | None = None
         self._scene: LiveScene | None = None
         self._belief: Belief | None = None
         self._belief_received_ns = 0
@@ -224,6 +227,16 @@ class Daemon:
             queries.unknown_key(self.robot, [leaf for leaf, _ in answers])))
         log.info("zenoh session %s: listening on %s, connecting to %s, multicast scouting %s",
                  s.zid(), z.listen, z.connect, "on" if z.multicast_scouting else "off")
+
+    def _join_fleet(self) -> None:
+        """The fleet's places taken before the robot acts on its map (docs/fleet.md)."""
+        if not self.config.fleet.enabled or self._session is None:
+            return
+        self._fleet = FleetLink(
+            self.session, self._session, self.config.fleet, self.robot,
+            geometry_checksum(self.config.projection, self.config.panorama),
+            self._publish_events)
+        self._fleet.start()
 
     def _answer_status(self, query: zenoh.Query) -> None:
         api.parse(api.NoParameters, queries.payload(query), "status")
@@ -628,6 +641,8 @@ class Daemon:
         body = {"event": kind, "stamp_ns": time.monotonic_ns(), **fields}
         log.info("event %s", json.dumps(body))
         self.publish("events", zenoh_link.encode("placecell.event", body))
+        if self._fleet is not None:
+            self._fleet.on_event(kind, fields)
 
     def _on_belief(self, belief: Belief, updates: MapUpdates) -> None:
         self._belief = belief
@@ -715,6 +730,7 @@ class Daemon:
 
     def run(self) -> int:
         self._open_zenoh()
+        self._join_fleet()
         self._open_view()
         self.supervisor.start()
         ready = False
@@ -771,6 +787,8 @@ class Daemon:
             self._view.close()
         if self._session is not None:
             try:
+                if self._fleet is not None:
+                    self._fleet.close()
                 self._token.undeclare()
                 if self._ros2 is not None:
                     self._ros2.close()

@@ -105,6 +105,8 @@ class Mapper:
         # twice, nor kept twice (20 kB a place).
         self.prepared_elsewhere: Callable[[int], PreparedTemplates | None] = lambda _: None
         self.graph: TopologicalMap = store.load()
+        # The places taken from other robots: id here → (robot, its id there).
+        self.origins: dict[int, tuple[str, int]] = store.origins()
         # Each place's segment (design §6), replaced whole on every change of the map.
         self.segment_of: dict[int, int] = self.graph.segments()
         self._fill_cues()
@@ -272,6 +274,20 @@ class Mapper:
             added += self._settle_held()
         self.reembed()
         return stored, added
+
+    def adopt_place(self, place: Place, views: list[np.ndarray], robot: str,
+                    origin_id: int) -> Place:
+        """Store a place another robot of the fleet learned (its ``origin_id`` there),
+        a segment of its own until a transition joins it (docs/fleet.md); it does not
+        change which place this robot's odometry runs from."""
+        if place.background_estimate is None or place.signature is None:
+            place = with_cues(place)
+        with self._lock:
+            stored = self.store.adopt_place(place, views, robot, origin_id)
+            self.graph.add_place(dataclasses.replace(stored, reference_panorama=None))
+            self.origins[stored.id] = (robot, origin_id)
+            self.segment_of = self.graph.segments()
+        return stored
 
     def measure_cross_backgrounds(self, place_id: int) -> list[Place]:
         """The backgrounds in other places' views (daemon/mapping/backgrounds.py) that a

@@ -183,6 +183,40 @@ class MappingSession:
                                       "y": round(m.y, 4), "yaw": round(m.yaw, 5), **ends}),
                 *_held_events(confirmed)]
 
+    # ------------------------------------------------------------ the fleet
+    def adopt_place(self, place: Place, views: list[np.ndarray], robot: str,
+                    origin_id: int) -> list[Event]:
+        """A place another robot learned, taken from the fleet (docs/fleet.md): stored
+        and shown to the localiser (mapping mode only: in localisation mode the map is
+        read-only). Returns the events to publish."""
+        if not self.mapping:
+            return []
+        with self._lock:
+            stored = self.mapper.adopt_place(place, views, robot, origin_id)
+            self.holder.replace(lambda m: m.with_places([stored]))
+        return [("place_adopted", {"place": stored.id, "robot": robot,
+                                   "origin_id": origin_id})]
+
+    def adopt_transition(self, transition: Transition, robot: str) -> list[Event]:
+        """A transition ``robot`` measured between two places both in this map now
+        (their ids here): stored both ways, the `map` frame embedded again (as a closed
+        cycle's, add_cycle). Returns the events to publish."""
+        if not self.mapping:
+            return []
+        with self._lock:
+            before = dict(self.mapper.segment_of)
+            try:
+                confirmed = self.mapper.add_transition(transition)
+            except (PlacecellError, KeyError) as e:
+                log.error("could not store robot %s's transition: %s", robot, e)
+                return []
+            self.holder.replace(lambda m: m.with_transitions([transition, *confirmed]))
+            after = dict(self.mapper.segment_of)
+        ends = {"from": transition.from_id, "to": transition.to_id}
+        return [*segment_events(None, before, after, {**ends, "robot": robot}),
+                ("transition_added", {"source": transition.source, "robot": robot, **ends}),
+                *_held_events(confirmed)]
+
     def site_tie(self) -> tuple[str, SE2] | None:
         """The map frame's pose in a site's map (its frame name), if tied (design §11)."""
         tie = self.mapper.store.site_tie()

@@ -54,7 +54,7 @@ def export_map(store: MapStore, folder: str | Path) -> int:
         _write_png(out / f"place-{place.id}-reference.png", panorama)
         for k, view in enumerate(views):
             _write_png(out / f"place-{place.id}-view-{k}.png", view)
-    transitions = [_transition_json(t) for t in store.transitions()]
+    transitions = [transition_json(t) for t in store.transitions()]
     features = [_pair_json(pair) for pair in store.features()]
     _write_json(out / "places.json", places)
     _write_json(out / "transitions.json", transitions)
@@ -87,7 +87,7 @@ def import_map(folder: str | Path, path: str | Path) -> int:
         places = [_place_from_json(d, src) for d in places_doc]
         views = {int(d["id"]): [_read_view(src, str(name), d["id"])
                                 for name in d.get("views", [])] for d in places_doc}
-        transitions = [_transition_from_json(d) for d in transitions_doc]
+        transitions = [transition_from_json(d) for d in transitions_doc]
         features = [_pair_from_json(d) for d in features_doc]
         floor = _floor_from_json(_read_json(src / "floor.json")) \
             if (src / "floor.json").exists() else None
@@ -135,6 +135,23 @@ def _place_json(place: Place) -> dict[str, Any]:
 
 
 def _place_from_json(d: dict[str, Any], src: Path) -> Place:
+    pano = cv2.imread(str(src / str(d["panorama"])), cv2.IMREAD_UNCHANGED)
+    if pano is None:
+        raise ValueError(f"place {d['id']}: cannot read {d['panorama']}")
+    return place_from_json(d, pano)
+
+
+def place_json(place: Place) -> dict[str, Any]:
+    """A place as JSON (its landmarks' templates in base64, so they come back
+    identical), without its reference panorama."""
+    doc = _place_json(place)
+    del doc["panorama"]
+    return doc
+
+
+def place_from_json(d: dict[str, Any], pano: np.ndarray) -> Place:
+    """The place of :func:`place_json` with its reference panorama ``pano``; KeyError,
+    TypeError or ValueError naming what is wrong."""
     lms = []
     for lm in d["landmarks"]:
         raw = base64.b64decode(lm["template"], validate=True)
@@ -146,9 +163,6 @@ def _place_from_json(d: dict[str, Any], src: Path) -> Place:
                             int(lm["row"]), int(lm["col"]), float(lm["bearing"]),
                             float("nan") if lm["depth"] is None else float(lm["depth"]),
                             cov, float(lm["score"])))
-    pano = cv2.imread(str(src / str(d["panorama"])), cv2.IMREAD_UNCHANGED)
-    if pano is None:
-        raise ValueError(f"place {d['id']}: cannot read {d['panorama']}")
     ls = d.get("local_space")
     return Place(LandmarkSet(tuple(lms), int(d["width"]), int(d["margin"])), pano,
                  label=str(d["label"]), created_unix_s=float(d["created_unix_s"]),
@@ -164,13 +178,13 @@ def _place_from_json(d: dict[str, Any], src: Path) -> Place:
                  id=int(d["id"]))
 
 
-def _transition_json(t: Transition) -> dict[str, Any]:
+def transition_json(t: Transition) -> dict[str, Any]:
     m = t.T_from_to.mean
     return {"from": t.from_id, "to": t.to_id, "x": m.x, "y": m.y, "yaw": m.yaw,
             "covariance": t.T_from_to.covariance.tolist(), "source": t.source}
 
 
-def _transition_from_json(d: dict[str, Any]) -> Transition:
+def transition_from_json(d: dict[str, Any]) -> Transition:
     return Transition(int(d["from"]), int(d["to"]),
                       UncertainSE2(SE2(float(d["x"]), float(d["y"]), float(d["yaw"])),
                                    np.array(d["covariance"], dtype=float)),

@@ -40,7 +40,7 @@ from kernel.se2 import SE2, UncertainSE2
 
 log = logging.getLogger(__name__)
 
-SCHEMA_VERSION = 8
+SCHEMA_VERSION = 9
 APPLICATION = "placecell-map"
 
 _SCHEMA = """
@@ -109,8 +109,16 @@ CREATE TABLE views (                                      -- v8: learning views 
     PRIMARY KEY (place_id, k)
 )
 """
+_ORIGINS_TABLE = """
+CREATE TABLE origins (                                    -- v9: places a fleet shared
+    place_id  INTEGER PRIMARY KEY REFERENCES places(id),  -- its id in this map
+    robot     TEXT NOT NULL,                              -- the robot that learned it
+    origin_id INTEGER NOT NULL,                           -- its id in that robot's map
+    UNIQUE (robot, origin_id)
+)
+"""
 _SCHEMA += ";" + _RESUME_TABLE + ";" + _FEATURES_TABLE + ";" + _FLOOR_TABLE + ";" \
-    + _VIEWS_TABLE
+    + _VIEWS_TABLE + ";" + _ORIGINS_TABLE
 
 
 _PLACE_COLUMNS = ("id, label, created_unix_s, background_lrp, landmarks, local_space, "
@@ -331,6 +339,32 @@ class MapStore:
                 for one_way in t.both_ways():
                     self._put_transition(one_way)
         return dataclasses.replace(place, id=new_id)
+
+    def adopt_place(self, place: Place, views: Sequence[np.ndarray], robot: str,
+                    origin_id: int) -> Place:
+        """Store a place another robot learned (place ``origin_id`` of ``robot``'s map,
+        shared through the fleet, docs/fleet.md) with its learning views, under an id of
+        this map, in one transaction. Returns the place with that id; MapStoreError if
+        that robot's place is here already."""
+        self._writable()
+        blobs = [codec.encode_image(np.ascontiguousarray(v, dtype=np.uint8)) for v in views]
+        try:
+            with self._lock, _transaction(self._db):
+                new_id = self._insert_place(place, keep_id=False)
+                self._db.execute("INSERT INTO origins(place_id, robot, origin_id) "
+                                 "VALUES (?, ?, ?)", (new_id, robot, origin_id))
+                self._db.executemany(
+                    "INSERT INTO views(place_id, k, panorama, digest) VALUES (?, ?, ?, ?)",
+                    [(new_id, k, blob, codec.digest(blob)) for k, blob in enumerate(blobs)])
+        except sqlite3.IntegrityError as e:
+            raise MapStoreError(f"{self.path}: place {origin_id} of robot {robot!r} is "
+                                f"in the map already ({e})") from e
+        return dataclasses.replace(place, id=new_id)
+
+    def origins(self) -> dict[int, tuple[str, int]]:
+        """The places taken from other robots: this map's id → (robot, its id there)."""
+        return {int(r[0]): (str(r[1]), int(r[2])) for r in
+                self._all("SELECT place_id, robot, origin_id FROM origins")}
 
     def import_places(self, places: Sequence[Place], transitions: Sequence[Transition],
                       features: Sequence[PairFeatures] = ()) -> None:
@@ -680,7 +714,8 @@ def _migrate(db: sqlite3.Connection, p: Path, version: int) -> None:
     floor table (no floor model: the localiser learns one from its first colour frame);
     2 to 6 gain places.background_cross (NULL: the daemon's mapper measures it from the
     stored reference panoramas); 2 to 7 gain the views table (no learning views: an
-    older place's features are scored over its reference alone, as before)."""
+    older place's features are scored over its reference alone, as before); 2 to 8 gain
+    the origins table (every place its own robot's: none was taken from a fleet)."""
     with _transaction(db):
         if version == 2:
             db.execute("ALTER TABLE places ADD COLUMN background_estimate REAL")
@@ -695,6 +730,8 @@ def _migrate(db: sqlite3.Connection, p: Path, version: int) -> None:
             db.execute("ALTER TABLE places ADD COLUMN background_cross REAL")
         if version in (2, 3, 4, 5, 6, 7):
             db.execute(_VIEWS_TABLE)
+        if 2 <= version <= 8:
+            db.execute(_ORIGINS_TABLE)
             db.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'",
                        (str(SCHEMA_VERSION),))
         if version == 1:

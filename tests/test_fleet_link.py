@@ -1,0 +1,175 @@
+"""Robots share places through the fleet's router and its storage (daemon/service/fleet.py,
+docs/fleet.md): real zenoh sessions through a real zenohd with the storage manager plugin,
+real map files. A robot puts its places and transitions; a robot with an empty map takes
+them at start, follows new ones by subscription, takes each once (restarts included), and
+refuses what is not a fleet document or was seen with another camera geometry."""
+
+from __future__ import annotations
+
+import json
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zenoh
+
+from daemon.config import FleetSettings
+from daemon.localisation.settings import LocalisationSettings
+from daemon.mapping.settings import AcquisitionSettings, OdometryNoiseSettings
+from daemon.service.fleet import FleetLink
+from daemon.service.mapper import Link, Mapper
+from daemon.service.mapping_session import Event, MappingSession
+from daemon.store.fleet_wire import FleetPlace, PlaceName, encode_place, place_key
+from daemon.store.sqlite_store import MapStore
+from kernel.se2 import SE2, UncertainSE2
+from tests.daemon_harness import free_port, wait_for
+from tests.map_fixtures import synthetic_place
+from tools.fleet_router import fleet_routers
+
+GEOMETRY = "fleet-geometry"
+START_S = 60.0  # a router's start on a loaded machine
+SETTINGS = FleetSettings(enabled=True, fetch_timeout_s=START_S)
+T = UncertainSE2(SE2(1.5, 0.0, 0.0), np.diag([0.01, 0.01, 0.001]))
+
+pytestmark = pytest.mark.xdist_group("zenohd")
+
+
+def _client(endpoint: str) -> zenoh.Session:
+    config = zenoh.Config()
+    config.insert_json5("mode", json.dumps("client"))
+    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(config)
+
+
+class Robot:
+    """A robot's map owner and fleet link on its own map file and zenoh session; the
+    events its link publishes are kept, and ``arrived`` is set at each."""
+
+    def __init__(self, name: str, path: Path, endpoint: str) -> None:
+        self.name = name
+        self.session = MappingSession(Mapper(MapStore.open(path, GEOMETRY),
+                                             OdometryNoiseSettings()),
+                                      AcquisitionSettings(enabled=False),
+                                      LocalisationSettings(max_lookalikes=0))
+        self.z = _client(endpoint)
+        self.events: list[Event] = []
+        self.arrived = threading.Event()
+        self.link = FleetLink(self.session, self.z, SETTINGS, name, GEOMETRY, self._publish)
+
+    def _publish(self, events: list[Event]) -> None:
+        self.events += events
+        self.arrived.set()
+
+    def learn(self, seed: int, after: int | None) -> int:
+        """A place stored as a learn stores it, its events given to the link as the
+        daemon's publish_event does."""
+        rng = np.random.default_rng(seed)
+        learned = self.session.store_place(synthetic_place(rng, f"{self.name}-{seed}"),
+                                           [] if after is None else [Link(after, T)], [])
+        self.link.on_event("place_learned", {"place": learned.place.id})
+        for kind, fields in learned.events:
+            self.link.on_event(kind, fields)
+        return learned.place.id
+
+    def places(self) -> dict[int, tuple[str, int] | None]:
+        mapper = self.session.mapper
+        return {p.id: mapper.origins.get(p.id) for p in mapper.graph.places}
+
+    def close(self) -> None:
+        self.link.close()
+        self.z.close()
+        self.session.mapper.store.close()
+
+
+def _stored(watcher: zenoh.Session) -> set[str]:
+    return {str(r.ok.key_expr) for r in watcher.get("placecell/fleet/**", timeout=5.0)
+            if r.ok is not None}
+
+
+def test_a_robot_takes_the_fleets_places_at_start_and_as_they_are_learned(
+        tmp_path: Path) -> None:
+    with fleet_routers([free_port()], tmp_path, START_S) as (router,):
+        a = Robot("robot-a", tmp_path / "a.db", router.endpoint)
+        watcher = _client(router.endpoint)
+        robots = [a]
+        try:
+            first = a.learn(1, None)
+            second = a.learn(2, first)
+            assert a.link.start() == 0  # the fleet had nothing: its own put
+            keys = {"placecell/fleet/robot-a/place/1", "placecell/fleet/robot-a/place/2",
+                    "placecell/fleet/robot-a/transition/robot-a/1/robot-a/2"}
+            assert wait_for(lambda: _stored(watcher) == keys, START_S, 0.1), _stored(watcher)
+
+            # An empty map takes both places and their transition before it acts.
+            b = Robot("robot-b", tmp_path / "b.db", router.endpoint)
+            robots.append(b)
+            assert b.link.start() == 2
+            assert b.places() == {1: ("robot-a", first), 2: ("robot-a", second)}
+            assert b.session.mapper.graph.transition(1, 2) is not None
+            assert sorted(b.session.known.places) == [1, 2]
+            kinds = [(k, f.get("robot")) for k, f in b.events]
+            assert kinds == [("place_adopted", "robot-a"), ("place_adopted", "robot-a"),
+                             ("segments_joined", None), ("transition_added", "robot-a")], \
+                b.events  # each place taken alone is a segment until its transition
+
+            # A place learned now arrives by subscription, with its transition.
+            b.arrived.clear()
+            third = a.learn(3, second)
+            assert wait_for(lambda: len(b.places()) == 3 and b.session.mapper.graph
+                            .transition(2, 3) is not None, START_S, 0.05), b.events
+            assert b.places()[3] == ("robot-a", third)
+
+            # B's own place is put under its name; A takes it as A's place 4.
+            own = b.learn(4, 3)
+            assert wait_for(lambda: ("robot-b", own) in a.places().values(), START_S, 0.05)
+            assert a.session.mapper.graph.transition(third, 4) is not None
+
+            # Restarted on its map file: nothing taken twice, nothing lost.
+            b.close()
+            robots.remove(b)
+            b = Robot("robot-b", tmp_path / "b.db", router.endpoint)
+            robots.append(b)
+            assert b.link.start() == 0
+            assert len(b.places()) == 4 and not [e for e in b.events
+                                                 if e[0] == "place_adopted"]
+        finally:
+            watcher.close()
+            for robot in robots:
+                robot.close()
+
+
+def test_what_is_not_a_fleet_place_of_this_camera_never_reaches_the_map(
+        tmp_path: Path) -> None:
+    with fleet_routers([free_port()], tmp_path, START_S) as (router,):
+        b = Robot("robot-b", tmp_path / "b.db", router.endpoint)
+        writer = _client(router.endpoint)
+        try:
+            b.link.start()
+            rng = np.random.default_rng(5)
+            other_camera = FleetPlace(PlaceName("robot-x", 1), "another-geometry",
+                                      synthetic_place(rng), [])
+            mislabelled = FleetPlace(PlaceName("robot-a", 2), GEOMETRY,
+                                     synthetic_place(rng), [])
+            probe = writer.declare_publisher("placecell/fleet/robot-x/place/1")
+            assert wait_for(lambda: probe.matching_status.matching, START_S, 0.05)
+            writer.put("placecell/fleet/robot-x/place/1", encode_place(other_camera))
+            writer.put("placecell/fleet/robot-x/place/2", encode_place(mislabelled))
+            writer.put("placecell/fleet/robot-x/place/3", b"{not json")
+            writer.put("placecell/fleet/robot-x/photo/1", b"{}")
+            assert wait_for(lambda: b.link.refused == 4, START_S, 0.05), b.link.refused
+            assert b.places() == {} and b.events == []
+            # The same documents as the storage holds them: refused again at a start.
+            again = Robot("robot-c", tmp_path / "c.db", router.endpoint)
+            try:
+                assert again.link.start() == 0 and again.link.refused == 4
+                assert again.places() == {}
+            finally:
+                again.close()
+            good = FleetPlace(PlaceName("robot-x", 4), GEOMETRY, synthetic_place(rng), [])
+            writer.put(place_key("placecell/fleet", good.name), encode_place(good))
+            assert wait_for(lambda: b.places() == {1: ("robot-x", 4)}, START_S, 0.05)
+        finally:
+            writer.close()
+            b.close()
