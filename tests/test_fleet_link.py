@@ -17,7 +17,7 @@ import zenoh
 from daemon.config import FleetSettings
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.settings import AcquisitionSettings, OdometryNoiseSettings
-from daemon.service.fleet import FleetLink
+from daemon.service.fleet import SHARED, FleetLink
 from daemon.service.mapper import Link, Mapper
 from daemon.service.mapping_session import Event, MappingSession
 from daemon.store.fleet_wire import FleetPlace, PlaceName, encode_place, place_key
@@ -123,8 +123,9 @@ def test_a_robot_takes_the_fleets_places_at_start_and_as_they_are_learned(
 
             # B's own place is put under its name; A takes it as A's place 4.
             own = b.learn(4, 3)
-            assert wait_for(lambda: ("robot-b", own) in a.places().values(), START_S, 0.05)
-            assert a.session.mapper.graph.transition(third, 4) is not None
+            assert wait_for(lambda: ("robot-b", own) in a.places().values()
+                            and a.session.mapper.graph.transition(third, 4) is not None,
+                            START_S, 0.05), a.places()
 
             # Restarted on its map file: nothing taken twice, nothing lost.
             b.close()
@@ -136,6 +137,40 @@ def test_a_robot_takes_the_fleets_places_at_start_and_as_they_are_learned(
                                                  if e[0] == "place_adopted"]
         finally:
             watcher.close()
+            for robot in robots:
+                robot.close()
+
+
+def test_a_robot_cut_off_catches_up_and_a_router_restarted_empty_gets_all_back(
+        tmp_path: Path) -> None:
+    """The fleet's router goes away (its storage is in memory) while robot A maps on:
+    when it is back, empty, A puts everything of its own again, the place learned while
+    cut off included, and a robot starting then takes all of it."""
+    with fleet_routers([free_port()], tmp_path, START_S) as (router,):
+        a = Robot("robot-a", tmp_path / "a.db", router.endpoint)
+        watcher: zenoh.Session | None = None
+        robots = [a]
+        try:
+            first = a.learn(1, None)
+            a.link.start()
+            watcher = _client(router.endpoint)
+            assert wait_for(lambda: "placecell/fleet/robot-a/place/1" in _stored(watcher),
+                            START_S, 0.1)
+            watcher.close()
+            router.stop()
+            second = a.learn(2, first)  # cut off: nothing stores it now
+            router.start(START_S)  # back, empty
+            watcher = _client(router.endpoint)
+            keys = {"placecell/fleet/robot-a/place/1", "placecell/fleet/robot-a/place/2",
+                    "placecell/fleet/robot-a/transition/robot-a/1/robot-a/2"}
+            assert wait_for(lambda: _stored(watcher) == keys, START_S, 0.2), _stored(watcher)
+            b = Robot("robot-b", tmp_path / "b.db", router.endpoint)
+            robots.append(b)
+            assert b.link.start() == 2
+            assert b.places() == {1: ("robot-a", first), 2: ("robot-a", second)}
+        finally:
+            if watcher is not None:
+                watcher.close()
             for robot in robots:
                 robot.close()
 
@@ -154,10 +189,11 @@ def test_what_is_not_a_fleet_place_of_this_camera_never_reaches_the_map(
                                      synthetic_place(rng), [])
             probe = writer.declare_publisher("placecell/fleet/robot-x/place/1")
             assert wait_for(lambda: probe.matching_status.matching, START_S, 0.05)
-            writer.put("placecell/fleet/robot-x/place/1", encode_place(other_camera))
-            writer.put("placecell/fleet/robot-x/place/2", encode_place(mislabelled))
-            writer.put("placecell/fleet/robot-x/place/3", b"{not json")
-            writer.put("placecell/fleet/robot-x/photo/1", b"{}")
+            for key, payload in (("place/1", encode_place(other_camera)),
+                                 ("place/2", encode_place(mislabelled)),
+                                 ("place/3", b"{not json"), ("photo/1", b"{}")):
+                writer.put(f"placecell/fleet/robot-x/{key}", payload,
+                           congestion_control=SHARED)
             assert wait_for(lambda: b.link.refused == 4, START_S, 0.05), b.link.refused
             assert b.places() == {} and b.events == []
             # The same documents as the storage holds them: refused again at a start.
@@ -168,7 +204,8 @@ def test_what_is_not_a_fleet_place_of_this_camera_never_reaches_the_map(
             finally:
                 again.close()
             good = FleetPlace(PlaceName("robot-x", 4), GEOMETRY, synthetic_place(rng), [])
-            writer.put(place_key("placecell/fleet", good.name), encode_place(good))
+            writer.put(place_key("placecell/fleet", good.name), encode_place(good),
+                       congestion_control=SHARED)
             assert wait_for(lambda: b.places() == {1: ("robot-x", 4)}, START_S, 0.05)
         finally:
             writer.close()

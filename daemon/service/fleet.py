@@ -46,6 +46,10 @@ from kernel.errors import PlacecellError
 
 log = logging.getLogger(__name__)
 
+# A place is ~0.5 MB in fragments: with zenoh's default (drop when the queue is full) a
+# busy machine lost the samples put right after one. The map is worth the wait.
+SHARED = zenoh.CongestionControl.BLOCK
+
 
 class FleetLink:
     """One robot's link (module docstring). ``publish``: events to publish (place_adopted,
@@ -63,6 +67,13 @@ class FleetLink:
         self._lock = threading.Lock()  # one sample taken at a time
         self._waiting: dict[str, FleetTransition] = {}  # by key: a place not here yet
         self._subscriber: Any = None
+        self._querier: Any = None
+        self._listener: Any = None
+        self._storage = threading.Event()  # a complete storage of the key space is known
+        self._resync = threading.Event()  # it came back: catch up
+        self._closing = threading.Event()
+        self._thread = threading.Thread(target=self._resyncing, name="placecell-fleet",
+                                        daemon=True)
         self.refused = 0  # samples refused (malformed, foreign geometry)
 
     # ------------------------------------------------------------------ start, stop
@@ -70,38 +81,64 @@ class FleetLink:
         """Take the fleet's places, put this robot's own, then follow the key space
         (module docstring). Returns how many places were taken."""
         prefix = self.settings.key_prefix
-        querier = self.z.declare_querier(f"{prefix}/**",
-                                         target=zenoh.QueryTarget.ALL_COMPLETE,
-                                         timeout=self.settings.fetch_timeout_s)
-        try:
-            matched = threading.Event()
-            listener = querier.declare_matching_listener(
-                lambda status: matched.set() if status.matching else None)
-            # zenoh's stubs type matching_status as bool; it is a MatchingStatus.
-            if querier.matching_status.matching:  # type: ignore[attr-defined]
-                matched.set()
-            known = matched.wait(self.settings.fetch_timeout_s)
-            listener.undeclare()
-            # Subscribed before asking: a place put meanwhile arrives one way or the other.
-            self._subscriber = self.z.declare_subscriber(f"{prefix}/**", self._on_sample)
-            taken, present = 0, set()
-            if not known:
-                log.warning("fleet: no storage of %s/** answered within %.1f s; acting on "
-                            "the own map (places of others arrive as they are put)", prefix,
-                            self.settings.fetch_timeout_s)
-            else:
-                samples = [r.ok for r in querier.get() if r.ok is not None]
-                # Places before transitions (a transition is taken once both ends are
-                # here), each robot's in the order it learned them.
-                samples.sort(key=lambda s: self._order(str(s.key_expr)))
-                for sample in samples:
-                    present.add(str(sample.key_expr))
-                    taken += self._take(str(sample.key_expr), sample.payload.to_bytes())
-        finally:
-            querier.undeclare()
-        self._put_own(present)
-        log.info("fleet: %d places taken from %s/**; %d of this map's own put", taken,
-                 prefix, self._own_count())
+        # Subscribed before asking: a place put meanwhile arrives one way or the other.
+        self._subscriber = self.z.declare_subscriber(f"{prefix}/**", self._on_sample)
+        self._querier = self.z.declare_querier(f"{prefix}/**",
+                                               target=zenoh.QueryTarget.ALL_COMPLETE,
+                                               timeout=self.settings.fetch_timeout_s)
+        # A complete storage of the key space known, at start and each time it comes back
+        # (a router restarted empty, a robot cut off and back): zenoh's matching event.
+        self._listener = self._querier.declare_matching_listener(self._on_matching)
+        # zenoh's stubs type matching_status as bool; it is a MatchingStatus.
+        if self._querier.matching_status.matching:  # type: ignore[attr-defined]
+            self._storage.set()
+        taken = 0
+        if self._storage.wait(self.settings.fetch_timeout_s):
+            taken = self._sync()
+        else:
+            log.warning("fleet: no storage of %s/** answered within %.1f s; acting on the "
+                        "own map (the fleet's places are taken, and its own put, once one "
+                        "does)", prefix, self.settings.fetch_timeout_s)
+        self._resync.clear()  # just done
+        self._thread.start()
+        return taken
+
+    def _on_matching(self, status: Any) -> None:  # a zenoh thread: no query here
+        if status.matching:
+            self._storage.set()
+            self._resync.set()
+        else:
+            self._storage.clear()
+            log.warning("fleet: no storage of %s/** reachable; mapping on alone",
+                        self.settings.key_prefix)
+
+    def _resyncing(self) -> None:
+        while True:
+            self._resync.wait()
+            if self._closing.is_set():
+                return
+            self._resync.clear()
+            try:
+                log.info("fleet: a storage of %s/** is back; catching up",
+                         self.settings.key_prefix)
+                self._sync()
+            except (PlacecellError, zenoh.ZError) as e:
+                log.error("fleet: catching up failed: %s (again when a storage returns)", e)
+
+    def _sync(self) -> int:
+        """Every other robot's place and transition the storage holds and this map does
+        not, taken; this map's own the storage lacks, put. Returns the places taken."""
+        samples = [r.ok for r in self._querier.get() if r.ok is not None]
+        # Places before transitions (a transition is taken once both ends are here),
+        # each robot's in the order it learned them.
+        samples.sort(key=lambda s: self._order(str(s.key_expr)))
+        taken, present = 0, set()
+        for sample in samples:
+            present.add(str(sample.key_expr))
+            taken += self._take(str(sample.key_expr), sample.payload.to_bytes())
+        put = self._put_own(present)
+        log.info("fleet: %d places taken from %s/**, %d of this map's own put", taken,
+                 self.settings.key_prefix, put)
         return taken
 
     def _order(self, key: str) -> tuple[bool, str, int, str]:
@@ -111,9 +148,14 @@ class FleetLink:
         return transition, parts[0], number, key
 
     def close(self) -> None:
-        if self._subscriber is not None:
-            self._subscriber.undeclare()
-            self._subscriber = None
+        self._closing.set()
+        self._resync.set()
+        if self._thread.is_alive():
+            self._thread.join(self.settings.fetch_timeout_s)
+        for declared in (self._listener, self._querier, self._subscriber):
+            if declared is not None:
+                declared.undeclare()
+        self._listener = self._querier = self._subscriber = None
 
     # ------------------------------------------------------------------ putting
     def on_event(self, kind: str, fields: dict[str, Any]) -> None:
@@ -132,27 +174,23 @@ class FleetLink:
             log.error("fleet: %s %s not put: %s (all is put again at the next start)",
                       kind, fields, e)
 
-    def _put_own(self, present: set[str]) -> None:
+    def _put_own(self, present: set[str]) -> int:
         """This map's own places and its transitions that the storage does not hold
-        (``present``: the keys it answered with)."""
+        (``present``: the keys it answered with). Returns the places put."""
         mapper = self.session.mapper
         prefix = self.settings.key_prefix
         with mapper.lock:
             own = [p.id for p in mapper.graph.places if p.id not in mapper.origins]
             transitions = mapper.store.transitions()
-        for place_id in own:
-            if place_key(prefix, PlaceName(self.robot, place_id)) not in present:
-                self._put_place(place_id)
+        missing = [p for p in own if place_key(prefix, PlaceName(self.robot, p)) not in present]
+        for place_id in missing:
+            self._put_place(place_id)
         for t in transitions:
             a, b = self._name(t.from_id), self._name(t.to_id)
             if (a.robot, a.id) < (b.robot, b.id) \
                     and transition_key(prefix, self.robot, a, b) not in present:
                 self._put_transition(t)
-
-    def _own_count(self) -> int:
-        mapper = self.session.mapper
-        with mapper.lock:
-            return sum(1 for p in mapper.graph.places if p.id not in mapper.origins)
+        return len(missing)
 
     def _put_place(self, place_id: int) -> None:
         mapper = self.session.mapper
@@ -163,7 +201,8 @@ class FleetLink:
             views = mapper.store.views(place_id)
         name = PlaceName(self.robot, place_id)
         self.z.put(place_key(self.settings.key_prefix, name),
-                   encode_place(FleetPlace(name, self.geometry_checksum, place, views)))
+                   encode_place(FleetPlace(name, self.geometry_checksum, place, views)),
+                   congestion_control=SHARED)
 
     def _put_transition(self, t: Transition) -> None:
         """One key per transition: put from the place named first."""
@@ -172,7 +211,8 @@ class FleetLink:
             t, a, b = t.reversed(), b, a
         self.z.put(transition_key(self.settings.key_prefix, self.robot, a, b),
                    encode_transition(FleetTransition(
-                       self.robot, a, b, Transition(a.id, b.id, t.T_from_to, t.source))))
+                       self.robot, a, b, Transition(a.id, b.id, t.T_from_to, t.source))),
+                   congestion_control=SHARED)
 
     def _name(self, place_id: int) -> PlaceName:
         origin = self.session.mapper.origins.get(place_id)
