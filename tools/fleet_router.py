@@ -31,17 +31,21 @@ class FleetRouter:
     """One router: ``start`` and ``stop`` it as often as a test needs (the same port, the
     same zenoh id, an empty storage each start, as a restarted router has)."""
 
-    def __init__(self, port: int, peers: list[int], zid: str, log_path: Path) -> None:
+    def __init__(self, port: int, peers: list[int], zid: str, log_path: Path,
+                 config: Path = CONFIG, scheme: str = "tcp") -> None:
+        """``config``: the router's configuration (CONFIG; a site's with TLS and access
+        control, config/fleet/router-secure.json5, with ``scheme`` "tls")."""
         self.port, self.peers, self.zid, self.log_path = port, peers, zid, log_path
-        self.endpoint = f"tcp/127.0.0.1:{port}"
+        self.config, self.scheme = config, scheme
+        self.endpoint = f"{scheme}/127.0.0.1:{port}"
         self._proc: subprocess.Popen[bytes] | None = None
 
     def start(self, timeout_s: float) -> None:
         """Start zenohd and return once it listens (``timeout_s``: at most this long)."""
-        args = [_built("--path"), "-c", str(CONFIG), "--plugin-search-dir",
+        args = [_built("--path"), "-c", str(self.config), "--plugin-search-dir",
                 _built("--plugin-dir"), "-i", self.zid, "-l", self.endpoint]
         for peer in self.peers:
-            args += ["-e", f"tcp/127.0.0.1:{peer}"]
+            args += ["-e", f"{self.scheme}/127.0.0.1:{peer}"]
         with self.log_path.open("a") as log:
             self._proc = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT)
         end = time.monotonic() + timeout_s
