@@ -6,7 +6,6 @@ refuses what is not a fleet document or was seen with another camera geometry.""
 
 from __future__ import annotations
 
-import json
 import threading
 from pathlib import Path
 
@@ -25,7 +24,7 @@ from daemon.store.sqlite_store import MapStore
 from kernel.se2 import SE2, UncertainSE2
 from tests.daemon_harness import free_port, wait_for
 from tests.map_fixtures import synthetic_place
-from tools.fleet_router import fleet_routers
+from tools.fleet_router import client_session, fleet_routers
 
 GEOMETRY = "fleet-geometry"
 START_S = 60.0  # a router's start on a loaded machine
@@ -33,14 +32,6 @@ SETTINGS = FleetSettings(enabled=True, fetch_timeout_s=START_S)
 T = UncertainSE2(SE2(1.5, 0.0, 0.0), np.diag([0.01, 0.01, 0.001]))
 
 pytestmark = pytest.mark.xdist_group("zenohd")
-
-
-def _client(endpoint: str) -> zenoh.Session:
-    config = zenoh.Config()
-    config.insert_json5("mode", json.dumps("client"))
-    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    config.insert_json5("scouting/multicast/enabled", "false")
-    return zenoh.open(config)
 
 
 class Robot:
@@ -53,7 +44,7 @@ class Robot:
                                              OdometryNoiseSettings()),
                                       AcquisitionSettings(enabled=False),
                                       LocalisationSettings(max_lookalikes=0))
-        self.z = _client(endpoint)
+        self.z = client_session(endpoint)
         self.events: list[Event] = []
         self.arrived = threading.Event()
         self.link = FleetLink(self.session, self.z, SETTINGS, name, GEOMETRY, self._publish)
@@ -92,7 +83,7 @@ def test_a_robot_takes_the_fleets_places_at_start_and_as_they_are_learned(
         tmp_path: Path) -> None:
     with fleet_routers([free_port()], tmp_path, START_S) as (router,):
         a = Robot("robot-a", tmp_path / "a.db", router.endpoint)
-        watcher = _client(router.endpoint)
+        watcher = client_session(router.endpoint)
         robots = [a]
         try:
             first = a.learn(1, None)
@@ -153,14 +144,14 @@ def test_a_robot_cut_off_catches_up_and_a_router_restarted_empty_gets_all_back(
         try:
             first = a.learn(1, None)
             a.link.start()
-            watcher = _client(router.endpoint)
+            watcher = client_session(router.endpoint)
             assert wait_for(lambda: "placecell/fleet/robot-a/place/1" in _stored(watcher),
                             START_S, 0.1)
             watcher.close()
             router.stop()
             second = a.learn(2, first)  # cut off: nothing stores it now
             router.start(START_S)  # back, empty
-            watcher = _client(router.endpoint)
+            watcher = client_session(router.endpoint)
             keys = {"placecell/fleet/robot-a/place/1", "placecell/fleet/robot-a/place/2",
                     "placecell/fleet/robot-a/transition/robot-a/1/robot-a/2"}
             assert wait_for(lambda: _stored(watcher) == keys, START_S, 0.2), _stored(watcher)
@@ -179,7 +170,7 @@ def test_what_is_not_a_fleet_place_of_this_camera_never_reaches_the_map(
         tmp_path: Path) -> None:
     with fleet_routers([free_port()], tmp_path, START_S) as (router,):
         b = Robot("robot-b", tmp_path / "b.db", router.endpoint)
-        writer = _client(router.endpoint)
+        writer = client_session(router.endpoint)
         try:
             b.link.start()
             rng = np.random.default_rng(5)

@@ -13,7 +13,7 @@ import pytest
 import zenoh
 
 from tests.daemon_harness import free_port, wait_for
-from tools.fleet_router import fleet_routers
+from tools.fleet_router import client_session, fleet_routers
 
 KEYS = "placecell/fleet/test"
 START_S = 60.0  # a router's start on a loaded machine
@@ -22,14 +22,6 @@ START_S = 60.0  # a router's start on a loaded machine
 CAUGHT_UP_S = 60.0
 
 pytestmark = pytest.mark.xdist_group("zenohd")
-
-
-def _client(endpoint: str) -> zenoh.Session:
-    config = zenoh.Config()
-    config.insert_json5("mode", json.dumps("client"))
-    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    config.insert_json5("scouting/multicast/enabled", "false")
-    return zenoh.open(config)
 
 
 def _stored_by(session: zenoh.Session, zid: str) -> set[str]:
@@ -46,8 +38,8 @@ def _stored_by(session: zenoh.Session, zid: str) -> set[str]:
 def test_a_restarted_router_takes_what_it_missed_from_the_other(tmp_path: Path) -> None:
     ports = [free_port(), free_port()]
     with fleet_routers(ports, tmp_path, START_S) as (a, b):
-        robot = _client(a.endpoint)
-        watcher = _client(b.endpoint)
+        robot = client_session(a.endpoint)
+        watcher = client_session(b.endpoint)
         try:
             # A client sends a put only where it knows a subscriber (the storages'): once
             # the router has told it of them.
@@ -66,7 +58,7 @@ def test_a_restarted_router_takes_what_it_missed_from_the_other(tmp_path: Path) 
                 robot.put(key, json.dumps({"key": key}))
             b.start(START_S)  # empty: its storage is in memory
             watcher.close()
-            watcher = _client(b.endpoint)
+            watcher = client_session(b.endpoint)
             assert wait_for(lambda: _stored_by(watcher, b.zid) == first | second,
                             CAUGHT_UP_S, 0.2), sorted(_stored_by(watcher, b.zid))
             a.stop()  # the router the robot put through is gone: nothing is lost

@@ -6,11 +6,14 @@ are built by ``tools/build-zenohd.sh`` (``make test`` runs it)."""
 from __future__ import annotations
 
 import contextlib
+import json
 import socket
 import subprocess
 import time
 from collections.abc import Iterator
 from pathlib import Path
+
+import zenoh
 
 from tools.daemon_process import REPO
 
@@ -86,3 +89,12 @@ def fleet_routers(ports: list[int], folder: Path, timeout_s: float
     finally:
         for router in routers:
             router.stop()
+
+
+def client_session(endpoint: str) -> zenoh.Session:
+    """A zenoh client of the router at ``endpoint`` (loopback, no scouting)."""
+    config = zenoh.Config()
+    config.insert_json5("mode", json.dumps("client"))
+    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(config)

@@ -165,6 +165,16 @@ class MappingSession:
     def add_cycle(self, transition: Transition) -> list[Event]:
         """A cycle closed by local estimates in both places (design §6, §7.1.3): stored,
         and the `map` frame embedded again."""
+        m = transition.T_from_to.mean
+        return self._add_transition(transition, "the cycle's", {
+            "source": "cycle", "x": round(m.x, 4), "y": round(m.y, 4),
+            "yaw": round(m.yaw, 5)})
+
+    def _add_transition(self, transition: Transition, whose: str,
+                        fields: dict[str, Any]) -> list[Event]:
+        """A transition measured while localising, stored both ways (mapping mode only),
+        with the held odometry it confirmed; its segments joined, `transition_added`
+        with ``fields``."""
         if not self.mapping:
             return []
         with self._lock:
@@ -172,16 +182,14 @@ class MappingSession:
             try:
                 confirmed = self.mapper.add_transition(transition)
             except (PlacecellError, KeyError) as e:
-                log.error("could not store the cycle's transition: %s", e)
+                log.error("could not store %s transition: %s", whose, e)
                 return []
             self.holder.replace(lambda m: m.with_transitions([transition, *confirmed]))
             after = dict(self.mapper.segment_of)
-        m = transition.T_from_to.mean
         ends = {"from": transition.from_id, "to": transition.to_id}
-        return [*segment_events(None, before, after, ends),
-                ("transition_added", {"source": "cycle", "x": round(m.x, 4),
-                                      "y": round(m.y, 4), "yaw": round(m.yaw, 5), **ends}),
-                *_held_events(confirmed)]
+        by = {**ends, **({"robot": fields["robot"]} if "robot" in fields else {})}
+        return [*segment_events(None, before, after, by),
+                ("transition_added", {**fields, **ends}), *_held_events(confirmed)]
 
     # ------------------------------------------------------------ the fleet
     def adopt_place(self, place: Place, views: list[np.ndarray], robot: str,
@@ -201,21 +209,8 @@ class MappingSession:
         """A transition ``robot`` measured between two places both in this map now
         (their ids here): stored both ways, the `map` frame embedded again (as a closed
         cycle's, add_cycle). Returns the events to publish."""
-        if not self.mapping:
-            return []
-        with self._lock:
-            before = dict(self.mapper.segment_of)
-            try:
-                confirmed = self.mapper.add_transition(transition)
-            except (PlacecellError, KeyError) as e:
-                log.error("could not store robot %s's transition: %s", robot, e)
-                return []
-            self.holder.replace(lambda m: m.with_transitions([transition, *confirmed]))
-            after = dict(self.mapper.segment_of)
-        ends = {"from": transition.from_id, "to": transition.to_id}
-        return [*segment_events(None, before, after, {**ends, "robot": robot}),
-                ("transition_added", {"source": transition.source, "robot": robot, **ends}),
-                *_held_events(confirmed)]
+        return self._add_transition(transition, f"robot {robot}'s",
+                                    {"source": transition.source, "robot": robot})
 
     def site_tie(self) -> tuple[str, SE2] | None:
         """The map frame's pose in a site's map (its frame name), if tied (design §11)."""
