@@ -19,7 +19,13 @@ from daemon.mapping.settings import AcquisitionSettings, OdometryNoiseSettings
 from daemon.service.fleet import SHARED, FleetLink
 from daemon.service.mapper import Link, Mapper
 from daemon.service.mapping_session import Event, MappingSession
-from daemon.store.fleet_wire import FleetPlace, PlaceName, encode_place, place_key
+from daemon.store.fleet_wire import (
+    FleetPlace,
+    PlaceName,
+    decode_place,
+    encode_place,
+    place_key,
+)
 from daemon.store.sqlite_store import MapStore
 from kernel.se2 import SE2, UncertainSE2
 from tests.daemon_harness import free_port, wait_for
@@ -162,6 +168,43 @@ def test_a_robot_cut_off_catches_up_and_a_router_restarted_empty_gets_all_back(
         finally:
             if watcher is not None:
                 watcher.close()
+            for robot in robots:
+                robot.close()
+
+
+def test_another_map_under_a_robots_name_overwrites_nothing_in_the_fleet(
+        tmp_path: Path) -> None:
+    """Robot A's map file replaced by an empty one: its next place would be a place 1 of
+    robot A too, not the one the fleet holds (and others took). The link finds the
+    fleet's place 1 is not this map's, says why, and puts nothing of the new map."""
+    with fleet_routers([free_port()], tmp_path, START_S) as (router,):
+        a = Robot("robot-a", tmp_path / "a.db", router.endpoint)
+        robots = [a]
+        watcher = client_session(router.endpoint)
+        try:
+            a.learn(1, None)
+            a.link.start()
+            key = "placecell/fleet/robot-a/place/1"
+            assert wait_for(lambda: key in _stored(watcher), START_S, 0.1)
+            original = a.session.mapper.graph.place(1).created_unix_s
+            a.close()
+            robots.remove(a)
+            again = Robot("robot-a", tmp_path / "new.db", router.endpoint)
+            robots.append(again)
+            again.link.start()
+            assert again.link.conflict is not None and "another map file" in \
+                again.link.conflict, again.link.conflict
+            again.learn(2, None)  # its place 1: not put
+            # A marker put after it on the same session: once stored, anything the
+            # learn had put would be too.
+            again.z.put("placecell/fleet/robot-a/marker", b"{}", congestion_control=SHARED)
+            assert wait_for(lambda: "placecell/fleet/robot-a/marker" in _stored(watcher),
+                            START_S, 0.1)
+            held = [decode_place(r.ok.payload.to_bytes()) for r in watcher.get(key, timeout=5.0)
+                    if r.ok is not None]
+            assert [p.place.created_unix_s for p in held] == [original]
+        finally:
+            watcher.close()
             for robot in robots:
                 robot.close()
 

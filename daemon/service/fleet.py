@@ -75,6 +75,7 @@ class FleetLink:
         self._thread = threading.Thread(target=self._resyncing, name="placecell-fleet",
                                         daemon=True)
         self.refused = 0  # samples refused (malformed, foreign geometry)
+        self.conflict: str | None = None  # why nothing of this map is put (_check_own)
 
     # ------------------------------------------------------------------ start, stop
     def start(self) -> int:
@@ -134,8 +135,13 @@ class FleetLink:
         samples.sort(key=lambda s: self._order(str(s.key_expr)))
         taken, present = 0, set()
         for sample in samples:
-            present.add(str(sample.key_expr))
-            taken += self._take(str(sample.key_expr), sample.payload.to_bytes())
+            key, payload = str(sample.key_expr), sample.payload.to_bytes()
+            present.add(key)
+            self._check_own(key, payload)
+            taken += self._take(key, payload)
+        if self.conflict is not None:
+            log.error("fleet: %s", self.conflict)
+            return taken
         put = self._put_own(present)
         log.info("fleet: %d places taken from %s/**, %d of this map's own put", taken,
                  self.settings.key_prefix, put)
@@ -192,7 +198,34 @@ class FleetLink:
                 self._put_transition(t)
         return len(missing)
 
+    def _check_own(self, key: str, payload: bytes) -> None:
+        """A place the storage holds under this robot's name must be this map's place
+        of that id (the same creation time): a robot given another map file under the
+        same name would otherwise overwrite the fleet's places with others of the same
+        names, which the robots that took the old ones would never take. On a mismatch
+        nothing more of this map is put (``conflict`` says why); taking goes on."""
+        rest = key[len(self.settings.key_prefix) + 1:].split("/")
+        if len(rest) != 3 or rest[0] != self.robot or rest[1] != "place":
+            return
+        try:
+            shared = decode_place(payload)
+        except FleetDocumentError:
+            return  # counted where it is taken
+        mapper = self.session.mapper
+        with mapper.lock:
+            mine = mapper.graph.place(shared.name.id) if shared.name.id in mapper.graph \
+                and shared.name.id not in mapper.origins else None
+        if mine is None or mine.created_unix_s != shared.place.created_unix_s:
+            self.conflict = (
+                f"the fleet holds place {shared.name.id} of robot {self.robot!r} learned "
+                f"at {shared.place.created_unix_s:.3f} (unix s), which this map "
+                f"{'has not' if mine is None else 'has with another time'}: another map "
+                "file under this robot's name; nothing of this map is put (give the robot "
+                "another name, or its own map file back)")
+
     def _put_place(self, place_id: int) -> None:
+        if self.conflict is not None:
+            return
         mapper = self.session.mapper
         if place_id in mapper.origins:
             return  # another robot's: it puts it itself
@@ -206,6 +239,8 @@ class FleetLink:
 
     def _put_transition(self, t: Transition) -> None:
         """One key per transition: put from the place named first."""
+        if self.conflict is not None:
+            return
         a, b = self._name(t.from_id), self._name(t.to_id)
         if (b.robot, b.id) < (a.robot, a.id):
             t, a, b = t.reversed(), b, a
