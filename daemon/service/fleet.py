@@ -5,10 +5,13 @@ The fleet's map lives in its routers' storage (zenohd with the storage manager p
 ``config/fleet/router.json5``), not in a protocol of ours. At start the link waits, up to
 ``[fleet] fetch_timeout_s``, until a complete storage of the key space is known (a querier's
 matching status), takes every place and transition of the other robots from it, and puts
-all of this robot's own (a storage that lost them gets them again); then it follows the key
-space by subscription and puts each place as it is learned. Taking happens before the
-robot acts on its map, so a robot started with an empty map in a mapped building localises
-in the fleet's places instead of learning a first place of its own.
+those of its own the storage lacks; then it follows the key space by subscription and puts
+each place and transition as it is added. It catches up the same way each time a storage
+comes back after none was reachable (a robot cut off, a router restarted empty). Taking
+happens before the robot acts on its map, so a robot started with an empty map in a mapped
+building localises in the fleet's places instead of learning a first place of its own. A
+map that is not the one the fleet knows under this robot's name puts nothing
+(:meth:`FleetLink._check_own`).
 
 A place is named across the fleet by the robot that learned it and its id there
 (daemon/store/fleet_wire.py); the map file remembers which of its places came from where
@@ -95,7 +98,11 @@ class FleetLink:
             self._storage.set()
         taken = 0
         if self._storage.wait(self.settings.fetch_timeout_s):
-            taken = self._sync()
+            try:
+                taken = self._sync()
+            except (PlacecellError, zenoh.ZError) as e:  # the robot runs on its own map
+                log.error("fleet: taking the fleet's places failed: %s (again when a "
+                          "storage returns)", e)
         else:
             log.warning("fleet: no storage of %s/** answered within %.1f s; acting on the "
                         "own map (the fleet's places are taken, and its own put, once one "
@@ -177,7 +184,7 @@ class FleetLink:
                 if t is not None:
                     self._put_transition(t)
         except (PlacecellError, zenoh.ZError) as e:
-            log.error("fleet: %s %s not put: %s (all is put again at the next start)",
+            log.error("fleet: %s %s not put: %s (put at the next catching up)",
                       kind, fields, e)
 
     def _put_own(self, present: set[str]) -> int:
