@@ -1,17 +1,29 @@
 """A robot started with an empty map in a building another robot mapped localises in that
-robot's places, taken from the fleet's storage, and learns none of its own (issue "A fleet
-shares one map", docs/fleet.md). Two daemons as subprocesses, each with its own map file,
+robot's places, taken from the fleet's storage, and learns none of its own; a place the
+other robot learns afterwards is in its map within a second (issue "A fleet shares one
+map", docs/fleet.md). Two daemons as subprocesses, each with its own map file,
 one after the other through a real zenohd with the storage manager plugin; every client in
 its own process."""
 
 from __future__ import annotations
 
 import json
+import statistics
 import subprocess
+import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from daemon.config import FleetSettings, load
+from daemon.localisation.settings import LocalisationSettings
+from daemon.mapping.settings import AcquisitionSettings, OdometryNoiseSettings
+from daemon.service.fleet import FleetLink
+from daemon.service.mapper import Mapper
+from daemon.service.mapping_session import MappingSession
+from daemon.store.sqlite_store import MapStore
+from kernel.panorama import geometry_checksum
 from tests.api_schema import check
 from tests.conftest import OfficeMap
 from tests.daemon_harness import (
@@ -24,13 +36,15 @@ from tests.daemon_harness import (
     wait_ready,
     write_config,
 )
+from tests.map_fixtures import synthetic_place
 from tests.test_fleet_link import START_S
-from tools.fleet_router import fleet_routers
+from tools.fleet_router import client_session, fleet_routers
 
 pytestmark = pytest.mark.xdist_group("zenohd")
 
 NEAR_B = (4.6, 10.1, 0.3)  # a standing robot, 0.2 m from place "b"'s reference
 TRACKED_WITHIN_FRAMES = 20
+PROPAGATION_S = 1.0  # a place learned by one robot is in another's map (median)
 
 
 def _standing(tmp: Path) -> Path:
@@ -69,6 +83,38 @@ def _stored_places(endpoint: str) -> set[str]:
         "timeout=5.0) if r.ok is not None]))\n"
         "s.close()\n")], cwd=REPO, capture_output=True, text=True, timeout=60)
     return set(json.loads(done.stdout)) if done.returncode == 0 else set()
+
+
+def _propagation(map_path: Path, endpoint: str, events_file: Path, geometry: str,
+                 count: int = 5) -> list[float]:
+    """Seconds from robot A's put of each of ``count`` new places to robot B's
+    place_adopted event (both stamps on this machine's monotonic clock)."""
+    owner = MappingSession(Mapper(MapStore.open(map_path, geometry), OdometryNoiseSettings()),
+                           AcquisitionSettings(enabled=False),
+                           LocalisationSettings(max_lookalikes=0))
+    session = client_session(endpoint)
+    link = FleetLink(owner, session, FleetSettings(enabled=True, fetch_timeout_s=START_S),
+                     "fleet-a", geometry, lambda _: None)
+    rng = np.random.default_rng(7)
+    took = []
+    try:
+        link.start()
+        for k in range(count):
+            learned = owner.store_place(synthetic_place(rng, f"a-new-{k}"), [], []).place
+            sent_ns = time.monotonic_ns()
+            link.on_event("place_learned", {"place": learned.id})
+
+            def adopted(origin: int = learned.id) -> list[dict]:  # type: ignore[type-arg]
+                return [e for e in read_json_lines(events_file) if e.get("event") ==
+                        "place_adopted" and e["origin_id"] == origin]
+
+            assert wait_for(adopted, START_S, 0.02), learned.id
+            took.append((adopted()[0]["stamp_ns"] - sent_ns) / 1e9)
+    finally:
+        link.close()
+        session.close()
+        owner.mapper.store.close()
+    return took
 
 
 def test_a_robot_with_an_empty_map_tracks_in_the_fleets_places_without_learning(
@@ -130,6 +176,14 @@ def test_a_robot_with_an_empty_map_tracks_in_the_fleets_places_without_learning(
                 later = read_json_lines(poses_file)[count:]
                 assert all(p["place"]["id"] == by_label["b"] for p in later
                            if p.get("state") == "tracking"), later[-3:]
+                # A place robot A learns now is in B's map within a second: A's link, on
+                # A's map file (its daemon stopped), puts each as the daemon does at its
+                # place_learned event; B's daemon says place_adopted once it has it.
+                took = _propagation(a.with_name("map.db"), router.endpoint, events_file,
+                                    geometry_checksum(load(str(b)).projection,
+                                                      load(str(b)).panorama))
+                print("fleet e2e: propagation s", [round(t, 3) for t in took])
+                assert statistics.median(took) <= PROPAGATION_S, took
             finally:
                 for f in followers:
                     f.terminate()
