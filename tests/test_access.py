@@ -29,7 +29,7 @@ def _acl() -> dict:
 def test_roles_by_certificate_name_from_the_shipped_rules() -> None:
     roles = access.roles_by_name(_acl())
     assert roles == {"operator": {"operators", "watchers"}, "viewer": {"watchers"},
-                     "router": {"routers"}}
+                     "router": {"routers"}, "fleet-router": {"fleet_routers"}}
 
 
 def test_a_plain_tcp_endpoint_beside_certificate_rules_is_a_config_error() -> None:
