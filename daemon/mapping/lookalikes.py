@@ -36,7 +36,8 @@ R = TypeVar("R")
 Spread = Callable[[Callable[[T], R], Sequence[T]], list[R]]
 
 
-def _each(work: Callable[[T], R], items: Sequence[T]) -> list[R]:
+def in_turn(work: Callable[[T], R], items: Sequence[T]) -> list[R]:
+    """``work`` on each item in turn, in the caller's thread (a Spread)."""
     return [work(item) for item in items]
 
 
@@ -71,7 +72,7 @@ def likeliest(views: list[np.ndarray], margin: int, signatures: dict[int, np.nda
 
 def lookalikes(views: list[np.ndarray], own: PreparedTemplates, own_background: float,
                others: dict[int, MappedPlace], margin: float, limit: int,
-               spread: Spread = _each) -> list[int]:
+               spread: Spread = in_turn) -> list[int]:
     """The places of ``others`` that the lower level tells from the new place (``own``,
     seen in the grey ``views``) by at most ``margin`` either way, at most ``limit``, the
     closest first. ``spread``: how the views' matching is run (in turn, or over threads;
@@ -94,7 +95,7 @@ def lookalikes(views: list[np.ndarray], own: PreparedTemplates, own_background: 
 
 def pair_features(new_id: int, new_views: list[np.ndarray],
                   lookalike_views: dict[int, list[np.ndarray]], margin: int,
-                  spread: Spread = _each) -> list[PairFeatures]:
+                  spread: Spread = in_turn) -> list[PairFeatures]:
     """The features of the new place (views: its reference first) and each look-alike
     (id → its grey views, the reference first, then its learning views if the map kept
     them): the new place's one feature (:func:`own_feature`), and each look-alike's

@@ -154,8 +154,12 @@ class FleetLink:
                  self.settings.key_prefix, put)
         return taken
 
+    def _chunks(self, key: str) -> list[str]:
+        """The key's chunks after the fleet's prefix: robot, kind, then the ids."""
+        return key[len(self.settings.key_prefix) + 1:].split("/")
+
     def _order(self, key: str) -> tuple[bool, str, int, str]:
-        parts = key[len(self.settings.key_prefix) + 1:].split("/")
+        parts = self._chunks(key)
         transition = len(parts) > 1 and parts[1] == "transition"
         number = int(parts[2]) if len(parts) > 2 and parts[2].isdigit() else 0
         return transition, parts[0], number, key
@@ -211,7 +215,7 @@ class FleetLink:
         same name would otherwise overwrite the fleet's places with others of the same
         names, which the robots that took the old ones would never take. On a mismatch
         nothing more of this map is put (``conflict`` says why); taking goes on."""
-        rest = key[len(self.settings.key_prefix) + 1:].split("/")
+        rest = self._chunks(key)
         if len(rest) != 3 or rest[0] != self.robot or rest[1] != "place":
             return
         try:
@@ -268,7 +272,7 @@ class FleetLink:
 
     def _take(self, key: str, payload: bytes) -> int:
         """A sample of the key space into the map; 1 if it was a place taken."""
-        rest = key[len(self.settings.key_prefix) + 1:].split("/")
+        rest = self._chunks(key)
         if len(rest) < 2 or rest[0] == self.robot:
             return 0  # this robot's own, echoed
         with self._lock:

@@ -24,7 +24,13 @@ from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.backgrounds import views_of
 from daemon.mapping.embedding import embed
 from daemon.mapping.graph import TopologicalMap
-from daemon.mapping.lookalikes import MappedPlace, likeliest, lookalikes, pair_features
+from daemon.mapping.lookalikes import (
+    MappedPlace,
+    in_turn,
+    likeliest,
+    lookalikes,
+    pair_features,
+)
 from daemon.mapping.odometry_chain import OdometryChain, held_verdict
 from daemon.mapping.place import Place, with_cues
 from daemon.mapping.settings import OdometryNoiseSettings
@@ -433,7 +439,7 @@ class Mapper:
         the drive is many independent searches — views, candidates, look-alikes — whose
         OpenCV, numpy and numba inner loops release the GIL."""
         if self._pool is None or len(items) < 2:
-            return [work(item) for item in items]
+            return in_turn(work, items)
         return list(self._pool.map(work, items))
 
     def templates(self, place_id: int) -> PreparedTemplates:

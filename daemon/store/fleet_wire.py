@@ -86,7 +86,7 @@ def encode_place(shared: FleetPlace) -> bytes:
 
 def decode_place(payload: bytes) -> FleetPlace:
     doc = _load(payload, PLACE_FORMAT)
-    name = _name(doc, "robot", "id")
+    name = _name(doc)
     try:
         panorama = _image(doc["panorama"], "panorama", colour=True)
         views = [_image(v, f"view {k}", colour=False) for k, v in enumerate(doc["views"])]
@@ -113,7 +113,7 @@ def decode_transition(payload: bytes) -> FleetTransition:
     if not isinstance(robot, str) or not robot:
         raise FleetDocumentError("a fleet transition without the robot that measured it")
     try:
-        a, b = _name(doc["a"], "robot", "id"), _name(doc["b"], "robot", "id")
+        a, b = _name(doc["a"]), _name(doc["b"])
         transition = transition_from_json(doc["transition"])
     except (KeyError, TypeError, ValueError) as e:
         raise FleetDocumentError(f"robot {robot!r}'s transition: malformed "
@@ -145,10 +145,11 @@ def _load(payload: bytes, expected: str) -> dict[str, Any]:
     return doc
 
 
-def _name(doc: Any, robot_field: str, id_field: str) -> PlaceName:
+def _name(doc: Any) -> PlaceName:
+    """A place's name from ``{"robot": ..., "id": ...}``."""
     if not isinstance(doc, dict):
         raise FleetDocumentError(f"a place's name is not an object: {doc!r}")
-    robot, place_id = doc.get(robot_field), doc.get(id_field)
+    robot, place_id = doc.get("robot"), doc.get("id")
     if not isinstance(robot, str) or not robot or "/" in robot:
         raise FleetDocumentError(f"not a robot's name: {robot!r}")
     if not isinstance(place_id, int) or isinstance(place_id, bool) or place_id < 1:
