@@ -178,3 +178,28 @@ def test_a_loss_of_a_tracker_started_from_a_guess_is_no_evidence_of_a_kidnap() -
     machine.switched()  # the estimate carried over a transition: no guess
     [lost] = [e for e in _frames(machine, t, S.loss_frames, 0.01, False, places, 2, 21) if e]
     assert lost.contradicted
+
+
+def test_a_place_handed_over_from_a_guess_is_confirmed_before_it_is_tracked() -> None:
+    """Tracking passed to a place with no transition from the last (a cycle, a path
+    through the graph): the pose there starts from a guess, so the place is confirmed as
+    the search's pick is — by a reliable, supported estimate within confirm_frames, else
+    passed over by the search — and only then tracked."""
+    places = [1, 2, 3]
+    machine = Relocalisation(S)
+    machine.told(0, 0, None)
+    t = Scripted(machine, {})
+    machine.handed_over(100_000_000, 1)
+    assert machine.mode == "confirm" and machine.confirming == "handover"
+    assert machine.guessing
+    _frames(machine, t, 3, 0.6, False, places, 2, 2)
+    assert machine.mode == "confirm"  # not yet found: relocalising, not tracking
+    [event] = _frames(machine, t, 1, 0.6, True, places, 2, 5)
+    assert event.kind == "relocalised" and event.how == "handover"
+    assert event.frames == 4 and machine.mode == "track"
+    assert machine.guessing  # the estimate found once, not yet reliable_frames in a row
+    # Handed over again, to a place that never gives a reliable estimate: passed over.
+    machine.handed_over(1_000_000_000, 10)
+    events = _frames(machine, t, S.confirm_frames, 0.2, False, places, 3, 11)
+    assert not any(events) and t.calls == []
+    assert machine.mode == "search" and machine.search.rejected == {3}

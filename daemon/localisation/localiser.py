@@ -346,7 +346,7 @@ class Localiser:
         switched_from, closed = None, None
         if self.tracker is not None and self.mode == mode and mode in ("track", "confirm") \
                 and self._frames % self.settings.recognise_every == 0:
-            scores, switched_from = self._recognise(prepare(), grey, odo)
+            scores, switched_from = self._recognise(prepare(), grey, odo, frame.stamp_ns)
         scores = _merged(scores, searched)
         if self._closure is not None and local is not None and self.tracker is not None \
                 and self.tracker.place.id == self._closure.to_id \
@@ -369,7 +369,7 @@ class Localiser:
         if revisited is not None and self.tracker is not None \
                 and self.tracker.estimate is not None \
                 and self.mode == "track":  # else the search finds the place itself
-            switched_from = self._move_to(revisited.place_id, grey, odo)
+            switched_from = self._move_to(revisited.place_id, grey, odo, frame.stamp_ns)
         timings["acquisition"] = (time.perf_counter() - t3) * 1e3
         timings["total"] = (time.perf_counter() - t0) * 1e3
         belief = self._belief(frame.stamp_ns, odo, motion, local, scores, switched_from,
@@ -579,10 +579,13 @@ class Localiser:
         self.reloc.told(self._last_stamp_ns or 0, self._frames, request.confirm)
         return True
 
-    def _recognise(self, prepared: PreparedPanorama, grey: np.ndarray, odo: Odometry | None
-                   ) -> tuple[tuple[PlaceScore, ...], int | None]:
+    def _recognise(self, prepared: PreparedPanorama, grey: np.ndarray, odo: Odometry | None,
+                   stamp_ns: int) -> tuple[tuple[PlaceScore, ...], int | None]:
         """LRP − background of the current place, its neighbours and a few others; pass
-        the estimate on when another place takes over (§8.2, §7.1.3)."""
+        the estimate on when another place takes over (§8.2, §7.1.3): over a transition
+        the estimate carries on; into a place with no transition from here it starts
+        from a guess, confirmed before it is published tracking (Relocalisation.
+        handed_over), and the cycle's transition is measured once it is."""
         assert self.tracker is not None and self.tracker.estimate is not None
         current = self.tracker.place.id
         links = self.map.neighbours(current)
@@ -619,7 +622,7 @@ class Localiser:
                 if odo is not None:
                     self._closure = CycleClosure(current, switch.place_id, here,
                                                  OdometryChain(odo, self.odometry_noise),
-                                                 self.settings)
+                                                 self.settings, after_confirmation=True)
         else:
             # No transition: start over in the place (σ recovery_sigma around its reference,
             # orientation from the bearings, §9.3.2) and measure the cycle's transition.
@@ -628,11 +631,14 @@ class Localiser:
             if odo is not None:
                 self._closure = CycleClosure(current, switch.place_id, here,
                                              OdometryChain(odo, self.odometry_noise),
-                                             self.settings)
+                                             self.settings, after_confirmation=True)
         self.tracker = tracker
-        # A new place's landmarks: its own evidence from here on; from a guess unless the
-        # estimate was carried over a transition.
-        self.reloc.switched(guessed=switch.kind != "neighbour")
+        # A new place's landmarks: its own evidence from here on; from a guess, to be
+        # confirmed, unless the estimate was carried over a transition.
+        if switch.kind == "neighbour":
+            self.reloc.switched()
+        else:
+            self.reloc.handed_over(stamp_ns, self._frames)
         return tuple(scores), current
 
     def _observe_closure(self, local: LocalResult) -> Transition | None:
@@ -692,9 +698,12 @@ class Localiser:
                 f"output stays below {self.settings.loss_output} for "
                 f"{self.settings.loss_frames} frames")
         elif self.mode == "confirm":
-            chose = f"resumed in place {place} from the pose saved at the last stop" \
-                if self.reloc.confirming == "resumed" else \
-                f"global relocalisation chose place {place}"
+            chose = {"resumed": f"resumed in place {place} from the pose saved at the "
+                                f"last stop",
+                     "handover": f"handed over to place {place}, which has no transition "
+                                 f"from the place left: its pose starts from a guess"
+                     }.get(self.reloc.confirming,
+                           f"global relocalisation chose place {place}")
             state, reason = "relocalising", f"{chose}; waiting for a reliable estimate"
         elif self.mode == "recover":
             state = "lost"
@@ -716,10 +725,12 @@ class Localiser:
         return Tracked(self.map, None if tracker is None else tracker.place.id, tracking,
                        estimate.pose if tracking and estimate is not None else None)
 
-    def _move_to(self, place_id: int, grey: np.ndarray, odo: Odometry | None) -> int:
+    def _move_to(self, place_id: int, grey: np.ndarray, odo: Odometry | None,
+                 stamp_ns: int) -> int:
         """Track in ``place_id`` from here, REVISIT_SIGMA_M around its reference (the
-        orientation from the bearings); the cycle's transition is measured from the
-        estimate being left, if reliable. Returns the place left."""
+        orientation from the bearings), confirmed before it is published tracking; the
+        cycle's transition is measured from the estimate being left, if reliable.
+        Returns the place left."""
         assert self.tracker is not None and self.tracker.estimate is not None
         current, est = self.tracker.place.id, self.tracker.estimate
         confidence = self.tracker.confidence
@@ -731,9 +742,9 @@ class Localiser:
             self._closure = CycleClosure(current, place_id,
                                          UncertainSE2(SE2.of(est.pose), est.covariance),
                                          OdometryChain(odo, self.odometry_noise),
-                                         self.settings)
+                                         self.settings, after_confirmation=True)
         self.tracker = tracker
-        self.reloc.switched(guessed=True)
+        self.reloc.handed_over(stamp_ns, self._frames)
         return current
 
 

@@ -22,7 +22,8 @@ mapping lap left consecutive places unjoined, a loss between them), ``cycles_clo
 daemon/mapping/embedding.py) the finished map embeds in: ``embedded_max_error_m`` and
 ``embedded_mean_error_m`` (each place's optimised position relative to the first place
 against its true one) and ``map_error_m_mean`` / ``map_error_m_p95`` (the lap poses
-composed into that frame against the truth relative to the first place).
+composed into that frame against the truth relative to the first place; None when none of
+them is in it, ``lap_poses_in_map`` says how many are).
 """
 
 from __future__ import annotations
@@ -216,8 +217,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             "transitions_missing": missing,
             "embedded_max_error_m": round(max(placed), 4),
             "embedded_mean_error_m": round(float(np.mean(placed)), 4),
-            "map_error_m_mean": round(float(np.mean(in_map)), 4),
-            "map_error_m_p95": round(float(np.percentile(in_map, 95)), 4),
+            # None when no lap pose lies in the map frame's segment (the mapping lap left
+            # the loop unjoined: transitions_missing).
+            "map_error_m_mean": round(float(np.mean(in_map)), 4) if in_map else None,
+            "map_error_m_p95": round(float(np.percentile(in_map, 95)), 4)
+            if in_map else None,
+            "lap_poses_in_map": len(in_map),
             "cycles_closed": len(closed),
             "place_switches": switches,
             "frames": int(len(all_errors)),
