@@ -333,8 +333,5 @@ class FleetLink:
             if name.robot == self.robot:
                 return name.id if name.id in mapper.graph and name.id not in mapper.origins \
                     else None
-            for place_id, origin in mapper.origins.items():
-                if origin == (name.robot, name.id):
-                    return place_id
-        return None
+            return mapper.taken.get((name.robot, name.id))
 
