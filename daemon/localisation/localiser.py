@@ -348,9 +348,11 @@ class Localiser:
                 and self._frames % self.settings.recognise_every == 0:
             scores, switched_from = self._recognise(prepare(), grey, odo, frame.stamp_ns)
         scores = _merged(scores, searched)
+        # A cycle's estimate in the new place counts once the place is confirmed (entered
+        # from a guess, or chosen by the search): a candidate can look reliable for
+        # frames and still be a look-alike's.
         if self._closure is not None and local is not None and self.tracker is not None \
-                and self.tracker.place.id == self._closure.to_id \
-                and (self.mode == "track" or not self._closure.after_confirmation):
+                and self.tracker.place.id == self._closure.to_id and self.mode == "track":
             closed = self._observe_closure(local)
         if self.mode == "track" and local is not None and odo is not None \
                 and self.tracker is not None \
@@ -552,8 +554,7 @@ class Localiser:
                 or not 0 < fix.odometry.distance_m <= s.bridge_max_m \
                 or place_id in self.map.through_graph(fix.place_id, THROUGH_GRAPH_PLACES):
             return None
-        return CycleClosure(fix.place_id, place_id, fix.T_place_robot, fix.odometry, s,
-                            after_confirmation=True)
+        return CycleClosure(fix.place_id, place_id, fix.T_place_robot, fix.odometry, s)
 
     def _spread(self, grey: np.ndarray, step: int) -> None:
         """§9.3.2 step 1: the particles around the estimate (σ recovery_local_sigma_m);
@@ -622,7 +623,7 @@ class Localiser:
                 if odo is not None:
                     self._closure = CycleClosure(current, switch.place_id, here,
                                                  OdometryChain(odo, self.odometry_noise),
-                                                 self.settings, after_confirmation=True)
+                                                 self.settings)
         else:
             # No transition: start over in the place (σ recovery_sigma around its reference,
             # orientation from the bearings, §9.3.2) and measure the cycle's transition.
@@ -631,7 +632,7 @@ class Localiser:
             if odo is not None:
                 self._closure = CycleClosure(current, switch.place_id, here,
                                              OdometryChain(odo, self.odometry_noise),
-                                             self.settings, after_confirmation=True)
+                                             self.settings)
         self.tracker = tracker
         # A new place's landmarks: its own evidence from here on; from a guess, to be
         # confirmed, unless the estimate was carried over a transition.
@@ -742,7 +743,7 @@ class Localiser:
             self._closure = CycleClosure(current, place_id,
                                          UncertainSE2(SE2.of(est.pose), est.covariance),
                                          OdometryChain(odo, self.odometry_noise),
-                                         self.settings, after_confirmation=True)
+                                         self.settings)
         self.tracker = tracker
         self.reloc.handed_over(stamp_ns, self._frames)
         return current

@@ -150,12 +150,7 @@ class CycleClosure:
     since) ∘ (estimate in to)⁻¹, taken once the estimate in ``to`` is reliable."""
 
     def __init__(self, from_id: int, to_id: int, T_from_robot: UncertainSE2,
-                 odometry: OdometryChain, settings: LocalisationSettings,
-                 after_confirmation: bool = False) -> None:
-        """``after_confirmation``: the estimate in ``to`` counts only once relocalisation
-        has confirmed the place (a bridge after a loss: a candidate being confirmed can
-        look reliable for frames and still be a look-alike's)."""
-        self.after_confirmation = after_confirmation
+                 odometry: OdometryChain, settings: LocalisationSettings) -> None:
         self.from_id, self.to_id = from_id, to_id
         self.T_from_robot = T_from_robot
         self.odometry = odometry
