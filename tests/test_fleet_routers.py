@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
+from daemon.service.zenoh_link import make_config
 from tests.daemon_harness import free_port, wait_for
 from tools.fleet_router import client_session, fleet_routers
 
@@ -69,3 +70,34 @@ def test_a_restarted_router_takes_what_it_missed_from_the_other(tmp_path: Path) 
         finally:
             robot.close()
             watcher.close()
+
+
+def test_robots_connected_to_both_routers_hear_each_other_through_either(
+        tmp_path: Path) -> None:
+    """Robots are zenoh peers (the daemon's session, ``[zenoh] mode = "peer"``) connected
+    to every fleet router; a place one puts reaches the other's subscription through the
+    routers (zenoh's failover brokering, which needs the routers' gossip), and still does
+    with either router gone."""
+    ports = [free_port(), free_port()]
+    with fleet_routers(ports, tmp_path, START_S) as routers:
+        endpoints = [r.endpoint for r in routers]
+        robots = [zenoh.open(make_config("peer", [f"tcp/127.0.0.1:{free_port()}"], order,
+                                         False, timestamping=True))
+                  for order in (endpoints, endpoints[::-1])]
+        heard: list[str] = []
+        try:
+            robots[1].declare_subscriber(f"{KEYS}/**", lambda s: heard.append(str(s.key_expr)))
+            probe = robots[0].declare_publisher(f"{KEYS}/robot-a/place/0")
+            assert wait_for(lambda: probe.matching_status.matching, START_S, 0.05)
+            for gone in (None, *routers):
+                if gone is not None:
+                    gone.stop()
+                key = f"{KEYS}/robot-a/place/{len(heard)}"
+                # a put is routed once the routers know the peer's subscription
+                assert wait_for(lambda k=key: robots[0].put(k, b"place") or k in heard,
+                                CAUGHT_UP_S, 0.2), (gone, heard)
+                if gone is not None:
+                    gone.start(START_S)
+        finally:
+            for r in robots:
+                r.close()
