@@ -52,6 +52,9 @@ EXPERIMENTS: dict[str, tuple[str, str, str]] = {
     "endurance": ("tools.eval.endurance", "office", "the daemon left to its job in mapping "
                   "mode: laps of a tour with kidnaps, restarts and operator learns (design "
                   "§6)"),
+    "fleet": ("tools.eval.fleet", "office", "three robots share one map through two fleet "
+              "routers: a robot with an empty map, propagation, segments joined, a router "
+              "killed (docs/fleet.md)"),
 }
 
 
