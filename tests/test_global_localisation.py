@@ -4,7 +4,12 @@ crafted recognition scores."""
 from __future__ import annotations
 
 from daemon.localisation.belief import PlaceScore
-from daemon.localisation.global_localisation import LeadWatch, LossDetector, PlaceSearch
+from daemon.localisation.global_localisation import (
+    LeadWatch,
+    LossDetector,
+    PlaceSearch,
+    faded,
+)
 from daemon.localisation.settings import LocalisationSettings
 
 PLACES = list(range(1, 51))
@@ -123,6 +128,27 @@ def test_travel_with_no_evidence_at_all_is_a_loss_of_its_own() -> None:
     assert loss.observe(nan, 0.3) is False  # declared once
     never = LossDetector(LocalisationSettings(blind_m=0.0))
     assert not any(never.observe(nan, 1.0) for _ in range(100))
+
+
+def test_a_loss_whose_output_only_faded_is_told_from_a_view_replaced() -> None:
+    """Driving out of a place's range the output fades through loss_output and stays
+    above doubt_output (office 3: 0.07-0.14); a robot carried off gives 0.00-0.02 at
+    once. A run of low frames with one such frame in it is not a fade."""
+    s = LocalisationSettings(loss_output=0.15, loss_frames=3, doubt_output=0.05)
+    assert faded(0.07, s) and faded(0.05, s) and not faded(0.049, s)
+    loss = LossDetector(s)
+    assert [loss.observe(v) for v in (0.3, 0.14, 0.09, 0.07)] == [False] * 3 + [True]
+    assert loss.faded and not loss.blind
+    kidnapped = LossDetector(s)
+    assert [kidnapped.observe(v) for v in (0.5, 0.0, 0.01, 0.02)] == [False] * 3 + [True]
+    assert not kidnapped.faded
+    # a contradicting frame of an earlier run of low frames does not count
+    mixed = LossDetector(s)
+    assert [mixed.observe(v) for v in (0.01, 0.4, 0.1, 0.1, 0.12)] == [False] * 4 + [True]
+    assert mixed.faded
+    dipped = LossDetector(s)
+    assert [dipped.observe(v) for v in (0.12, 0.02, 0.1)] == [False, False, True]
+    assert not dipped.faded
 
 
 def test_the_reason_of_a_loss_names_its_rule() -> None:

@@ -148,6 +148,9 @@ def test_a_loss_contradicts_odometry_only_after_the_robot_was_found_and_not_blin
     assert not loss_contradicts(by_sensor=True, blind=True, guessing=False)
     assert not loss_contradicts(by_sensor=True, blind=False, guessing=True)
     assert not loss_contradicts(by_sensor=False, blind=False, guessing=True)
+    # an output that only faded: the robot drove out of the place's range
+    assert not loss_contradicts(by_sensor=True, blind=False, guessing=False, faded=True)
+    assert loss_contradicts(by_sensor=False, blind=False, guessing=False, faded=True)
 
 
 def test_a_loss_of_a_tracker_started_from_a_guess_is_no_evidence_of_a_kidnap() -> None:

@@ -150,6 +150,17 @@ def near_best(scores: dict[int, float], margin: float) -> set[int]:
     return {p for p, score in scores.items() if score >= top - margin}
 
 
+def faded(least_low_output: float, settings: LocalisationSettings) -> bool:
+    """Whether a loss by the output rule is a view *fading* as the robot drives out of
+    its place's range, the estimate still right: through the whole run of low frames the
+    output stayed at or above ``doubt_output``, where a view replaced by another (a
+    robot carried off) gives 0.00-0.02 at once (the endurance runs' kidnaps, offices
+    1-5). Such a loss is no evidence of a kidnap (``loss_contradicts``): on office 3 the
+    mapping robot lost each place it had just learned 0.8-1 m on (output 0.07-0.14), and
+    holding the odometry to the next place split its map (cyclic, the fleet)."""
+    return least_low_output >= settings.doubt_output
+
+
 class LossDetector:
     """Loss of tracking: the raw output below ``loss_output`` for ``loss_frames`` frames
     in a row (§9.3.1); or no evidence at all — too few of the place's landmarks usable
@@ -163,11 +174,14 @@ class LossDetector:
         self.settings = settings
         self.low_frames = 0
         self.blind_m = 0.0  # odometry travel since the last frame with evidence
+        self.least_low = math.inf  # the lowest output of the current run of low frames
         self.why = ""  # the reason of the last loss declared
         self.blind = False  # ...declared by the blind rule (no evidence, nothing contradicted)
+        self.faded = False  # ...declared by the output rule, the view never contradicting
 
     def reset(self) -> None:
         self.low_frames = 0
+        self.least_low = math.inf
         self.blind_m = 0.0
 
     def observe(self, output: float, travelled_m: float = 0.0) -> bool:
@@ -182,14 +196,17 @@ class LossDetector:
                 self.why = (f"no evidence over {s.blind_m:.1f} m: fewer than "
                             f"{s.evidence_landmarks} of the place's landmarks usable from "
                             "the estimate (odometry alone)")
-                self.blind = True
+                self.blind, self.faded = True, False
                 return True
             return False
         self.blind_m = 0.0
-        self.low_frames = self.low_frames + 1 if output < s.loss_output else 0
+        low = output < s.loss_output
+        self.low_frames = self.low_frames + 1 if low else 0
+        self.least_low = min(self.least_low, output) if low else math.inf
         if self.low_frames == s.loss_frames:
             self.why = f"sensor output below {s.loss_output} for {s.loss_frames} frames"
             self.blind = False
+            self.faded = faded(self.least_low, s)
             return True
         return False
 

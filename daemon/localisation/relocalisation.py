@@ -76,17 +76,20 @@ def contradicted(support: float | None, confidence: float,
     return confidence <= 0.0 or (support is not None and support < settings.doubt_output)
 
 
-def loss_contradicts(by_sensor: bool, blind: bool, guessing: bool) -> bool:
+def loss_contradicts(by_sensor: bool, blind: bool, guessing: bool,
+                     faded: bool = False) -> bool:
     """Whether a loss is evidence the robot may have been carried off (the odometry run
     from the last place learned then measures nothing, design §6): the view contradicted
     the estimate — by the sensor output or by another place leading the search — but
-    not after blind travel (no evidence either way), and not while the tracker started
-    from a guess has not yet found the robot: then the guess was wrong, not the odometry
-    (cyclic over ROS 2, notes of 2026-12-06: a switch coming round the loop started 2 m
-    off, was lost 5 frames later, and the place learned next lost its link)."""
+    not after blind travel (no evidence either way), not when the output only faded
+    (``global_localisation.faded``: the robot drove out of the place's range), and not
+    while the tracker started from a guess has not yet found the robot: then the guess
+    was wrong, not the odometry (cyclic over ROS 2, notes of 2026-12-06: a switch coming
+    round the loop started 2 m off, was lost 5 frames later, and the place learned next
+    lost its link)."""
     if guessing:
         return False
-    return not (by_sensor and blind)
+    return not (by_sensor and (blind or faded))
 
 
 # ------------------------------------------------------------------ the machine
@@ -277,7 +280,8 @@ class Relocalisation:
                                       f"another place led the search by "
                                       f"{s.search_margin} for {s.led_frames} frames",
                                       contradicted=loss_contradicts(
-                                          lost_now, self.loss.blind, self.guessing))
+                                          lost_now, self.loss.blind, self.guessing,
+                                          self.loss.faded))
             trackers.lost(by_sensor=lost_now)
             self.lead_watch.reset()
             leader = self.leader(trackers, current, places)

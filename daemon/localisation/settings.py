@@ -116,7 +116,9 @@ class LocalisationSettings:
                                   "is 0) is not published tracking: the view contradicts "
                                   "the estimate (kidnapped 0.000-0.013, tracking 0.11 and "
                                   "up on office 1's endurance run); state lost until the "
-                                  "view agrees again or the loss is declared")
+                                  "view agrees again or the loss is declared; a loss whose "
+                                  "low frames never fell below it only faded (the robot "
+                                  "drove out of the place's range): no kidnap (design §6)")
     blind_m: float = setting(2.0, ge=0.0, le=1000.0, doc="odometry travel with no "
                              "evidence (fewer than evidence_landmarks usable from the "
                              "estimate: odometry alone) that is a loss too; 0: never")
