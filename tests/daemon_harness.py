@@ -23,6 +23,7 @@ from tools.daemon_process import busy_loops as busy_loops
 from tools.daemon_process import dump_toml as dump_toml
 from tools.daemon_process import free_port as free_port
 from tools.daemon_process import listening_session as listening_session
+from tools.daemon_process import read_json_lines as read_json_lines
 
 
 def write_config(tmp: Path, overrides: dict[str, Any] | None = None, *,
@@ -82,17 +83,6 @@ def client_session(port: int) -> zenoh.Session:
     conf.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
     conf.insert_json5("scouting/multicast/enabled", "false")
     return zenoh.open(conf)
-
-
-def read_json_lines(path: Path) -> list[dict[str, Any]]:
-    """The JSON objects of a file a follower writes (the line being written skipped)."""
-    out = []
-    for line in path.read_text().splitlines():
-        try:
-            out.append(json.loads(line))
-        except json.JSONDecodeError:
-            continue  # being written, or a client's own message
-    return out
 
 
 def wait_for(predicate: Any, timeout_s: float, interval_s: float = 0.05) -> bool:

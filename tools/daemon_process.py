@@ -37,6 +37,19 @@ def listening_session(port: int) -> zenoh.Session:
     return zenoh.open(conf)
 
 
+def read_json_lines(path: Path) -> list[dict[str, Any]]:
+    """The JSON objects of a file a follower writes (the line being written skipped;
+    none before the file exists)."""
+    out = []
+    if path.exists():
+        for line in path.read_text().splitlines():
+            try:
+                out.append(json.loads(line))
+            except json.JSONDecodeError:
+                continue  # being written, or a client's own message
+    return out
+
+
 def merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     """``base`` with ``over``'s values, tables merged key by key."""
     out = dict(base)

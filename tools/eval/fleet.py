@@ -59,7 +59,7 @@ from daemon.store.sqlite_store import MapStore
 from hal.sim.tour import plan_tour
 from hal.sim.world import load_world
 from kernel.se2 import SE2
-from tools.daemon_process import REPO, free_port, write_daemon_config
+from tools.daemon_process import REPO, free_port, read_json_lines, write_daemon_config
 from tools.fleet_router import FleetRouter, client_session, fleet_routers
 
 RIGHT_M = 0.5  # a tracked pose this near the truth is right (design §9's slack)
@@ -190,17 +190,6 @@ class Truth:
         recent = [p for p in s if p[0] >= s[-1][0] - still_s * 1e9]
         return all(math.dist(p[1:3], goal) <= near_m for p in recent) and max(
             math.dist(recent[0][1:3], p[1:3]) for p in recent) < 1e-4
-
-
-def read_json_lines(path: Path) -> list[dict[str, Any]]:
-    out = []
-    if path.exists():
-        for line in path.read_text().splitlines():
-            try:
-                out.append(json.loads(line))
-            except json.JSONDecodeError:
-                continue  # being written, or a client's own message
-    return out
 
 
 def stored(session: zenoh.Session) -> dict[str, dict[str, str]]:
