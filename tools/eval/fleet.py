@@ -317,39 +317,48 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     b_way = stretch(tour, args.stretch_m - args.overlap_m,  # type: ignore[arg-type]
                     2 * args.stretch_m - args.overlap_m)
     c_way = stretch(b_way[::-1], 0.0, args.c_drive_m)
-    with ExitStack() as stack:
-        folder = Path(args.keep) if args.keep else Path(
-            stack.enter_context(tempfile.TemporaryDirectory(prefix="placecell-fleet-")))
+    kept = contextlib.nullcontext(args.keep) if args.keep else \
+        tempfile.TemporaryDirectory(prefix="placecell-fleet-")
+    with kept as where:  # the files outlive the processes: the report reads them
+        folder = Path(where)
         folder.mkdir(parents=True, exist_ok=True)
-        ports = [free_port(), free_port()]
-        r1, r2 = stack.enter_context(fleet_routers(ports, folder, args.start_s))
-        both = [r1.endpoint, r2.endpoint]
-        a = Robot("fleet-a", folder / "a", a_way, both, args.seed, world_spec, args.speed)
-        b = Robot("fleet-b", folder / "b", b_way, both[::-1], args.seed + 1, world_spec,
-                  args.speed)
-        c = Robot("fleet-c", folder / "c", c_way, both, args.seed + 2, world_spec, args.speed)
-        for robot in (a, b, c):
-            robot.write(args.start_s)
-        started = time.monotonic()
-        stack.enter_context(a.running(args.timeout_s))
-        stack.enter_context(b.running(args.timeout_s))
-        killed = _kill_during_tour(args, a, b, r2)
-        wait_until("A's and B's tours", lambda: a.done() and b.done(),
-                   args.timeout_s - (time.monotonic() - started))
-        tours_s = time.monotonic() - started
-        stack.enter_context(c.running(args.timeout_s))
-        wait_until("C's drive", c.done, args.timeout_s)
-        with contextlib.suppress(RuntimeError):  # a C that never tracks is a result
-            wait_until("C's tracking", lambda: len(
-                [p for p in c.poses if p.get("state") == "tracking"]) >= 30, args.start_s)
-        watcher = client_session(r1.endpoint)
-        try:
-            caught_up = _caught_up(watcher, [r1, r2], args.start_s)
-            storages = stored(watcher)
-        finally:
-            watcher.close()
-        stack.close()  # the daemons stop, their map files closed
-        return _report(args, a, b, c, storages, caught_up, killed, tours_s, folder)
+        with ExitStack() as stack:  # left: the daemons stop, their map files closed
+            out = _run(args, folder, stack, a_way, b_way, c_way, world_spec)
+        return _report(args, *out, folder)
+
+
+def _run(args: argparse.Namespace, folder: Path, stack: ExitStack, a_way: list[Point],
+         b_way: list[Point], c_way: list[Point], world_spec: str
+         ) -> tuple[Robot, Robot, Robot, dict[str, dict[str, str]], bool, bool, float]:
+    """The routers and the robots in ``stack``, the tours driven; what the report needs."""
+    ports = [free_port(), free_port()]
+    r1, r2 = stack.enter_context(fleet_routers(ports, folder, args.start_s))
+    both = [r1.endpoint, r2.endpoint]
+    a = Robot("fleet-a", folder / "a", a_way, both, args.seed, world_spec, args.speed)
+    b = Robot("fleet-b", folder / "b", b_way, both[::-1], args.seed + 1, world_spec,
+              args.speed)
+    c = Robot("fleet-c", folder / "c", c_way, both, args.seed + 2, world_spec, args.speed)
+    for robot in (a, b, c):
+        robot.write(args.start_s)
+    started = time.monotonic()
+    stack.enter_context(a.running(args.timeout_s))
+    stack.enter_context(b.running(args.timeout_s))
+    killed = _kill_during_tour(args, a, b, r2)
+    wait_until("A's and B's tours", lambda: a.done() and b.done(),
+               args.timeout_s - (time.monotonic() - started))
+    tours_s = time.monotonic() - started
+    stack.enter_context(c.running(args.timeout_s))
+    wait_until("C's drive", c.done, args.timeout_s)
+    with contextlib.suppress(RuntimeError):  # a C that never tracks is a result
+        wait_until("C's tracking", lambda: len(
+            [p for p in c.poses if p.get("state") == "tracking"]) >= 30, args.start_s)
+    watcher = client_session(r1.endpoint)
+    try:
+        caught_up = _caught_up(watcher, [r1, r2], args.start_s)
+        storages = stored(watcher)
+    finally:
+        watcher.close()
+    return a, b, c, storages, caught_up, killed, tours_s
 
 
 def _kill_during_tour(args: argparse.Namespace, a: Robot, b: Robot, router: FleetRouter
