@@ -14,7 +14,7 @@ import zenoh
 
 from daemon.service.zenoh_link import make_config
 from tests.daemon_harness import free_port, wait_for
-from tools.fleet_router import client_session, fleet_routers
+from tools.fleet_router import client_session, fleet_routers, stored
 
 KEYS = "placecell/fleet/test"
 START_S = 60.0  # a router's start on a loaded machine
@@ -27,13 +27,7 @@ pytestmark = pytest.mark.xdist_group("zenohd")
 
 def _stored_by(session: zenoh.Session, zid: str) -> set[str]:
     """The keys router ``zid``'s storage answers with (every storage is asked)."""
-    keys = set()
-    for reply in session.get(f"{KEYS}/**", target=zenoh.QueryTarget.ALL,
-                             consolidation=zenoh.ConsolidationMode.NONE, timeout=5.0):
-        replier = reply.replier_id
-        if reply.ok is not None and replier is not None and str(replier.zid) == zid:
-            keys.add(str(reply.ok.key_expr))
-    return keys
+    return set(stored(session, f"{KEYS}/**", timeout_s=5.0).get(zid, {}))
 
 
 def test_a_restarted_router_takes_what_it_missed_from_the_other(tmp_path: Path) -> None:

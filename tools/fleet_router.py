@@ -6,6 +6,7 @@ are built by ``tools/build-zenohd.sh`` (``make test`` runs it)."""
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import socket
 import subprocess
@@ -98,3 +99,16 @@ def client_session(endpoint: str) -> zenoh.Session:
     config.insert_json5("connect/endpoints", json.dumps([endpoint]))
     config.insert_json5("scouting/multicast/enabled", "false")
     return zenoh.open(config)
+
+
+def stored(session: zenoh.Session, key_expr: str, timeout_s: float = 10.0
+           ) -> dict[str, dict[str, str]]:
+    """What each router's storage holds under ``key_expr`` (every storage asked), by the
+    router's zenoh id: key -> the digest of the sample stored there."""
+    out: dict[str, dict[str, str]] = {}
+    for reply in session.get(key_expr, target=zenoh.QueryTarget.ALL,
+                             consolidation=zenoh.ConsolidationMode.NONE, timeout=timeout_s):
+        if reply.ok is not None and reply.replier_id is not None:
+            out.setdefault(str(reply.replier_id.zid), {})[str(reply.ok.key_expr)] = \
+                hashlib.sha1(reply.ok.payload.to_bytes()).hexdigest()
+    return out

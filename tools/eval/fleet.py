@@ -39,7 +39,6 @@ import argparse
 import bisect
 import contextlib
 import functools
-import hashlib
 import json
 import math
 import statistics
@@ -60,7 +59,7 @@ from hal.sim.tour import plan_tour
 from hal.sim.world import load_world
 from kernel.se2 import SE2
 from tools.daemon_process import REPO, free_port, read_json_lines, write_daemon_config
-from tools.fleet_router import FleetRouter, client_session, fleet_routers
+from tools.fleet_router import FleetRouter, client_session, fleet_routers, stored
 
 RIGHT_M = 0.5  # a tracked pose this near the truth is right (design §9's slack)
 DUPLICATE_M = 0.3  # two places whose true references stand this near are one place twice
@@ -190,17 +189,6 @@ class Truth:
         recent = [p for p in s if p[0] >= s[-1][0] - still_s * 1e9]
         return all(math.dist(p[1:3], goal) <= near_m for p in recent) and max(
             math.dist(recent[0][1:3], p[1:3]) for p in recent) < 1e-4
-
-
-def stored(session: zenoh.Session) -> dict[str, dict[str, str]]:
-    """Each router's storage (by its zenoh id): key -> the sample's digest."""
-    out: dict[str, dict[str, str]] = {}
-    for reply in session.get(f"{PREFIX}/**", target=zenoh.QueryTarget.ALL,
-                             consolidation=zenoh.ConsolidationMode.NONE, timeout=10.0):
-        if reply.ok is not None and reply.replier_id is not None:
-            out.setdefault(str(reply.replier_id.zid), {})[str(reply.ok.key_expr)] = \
-                hashlib.sha1(reply.ok.payload.to_bytes()).hexdigest()
-    return out
 
 
 # ----------------------------------------------------------------- the robots
@@ -355,7 +343,7 @@ def _run(args: argparse.Namespace, folder: Path, stack: ExitStack, a_way: list[P
     watcher = client_session(r1.endpoint)
     try:
         caught_up = _caught_up(watcher, [r1, r2], args.start_s)
-        storages = stored(watcher)
+        storages = stored(watcher, f"{PREFIX}/**")
     finally:
         watcher.close()
     return a, b, c, storages, caught_up, killed, tours_s
@@ -385,7 +373,7 @@ def _caught_up(session: zenoh.Session, routers: list[FleetRouter], timeout_s: fl
     few seconds)."""
     end = time.monotonic() + timeout_s
     while True:
-        held = stored(session)
+        held = stored(session, f"{PREFIX}/**")
         same = len(held) == len(routers) and len({json.dumps(v, sort_keys=True)
                                                   for v in held.values()}) == 1
         if same or time.monotonic() > end:
