@@ -132,6 +132,16 @@ def test_a_robot_takes_the_fleets_places_at_start_and_as_they_are_learned(
             assert b.link.start() == 0
             assert len(b.places()) == 4 and not [e for e in b.events
                                                  if e[0] == "place_adopted"]
+            # Under its name B put what it measured, none of the transitions it took
+            # from A (each start put them again as B's before, each robot claiming every
+            # other's).
+            mine = {"placecell/fleet/robot-b/place/4",
+                    f"placecell/fleet/robot-b/transition/robot-a/{third}/robot-b/4"}
+            a.learn(5, third)  # put after whatever B put at its start
+            assert wait_for(lambda: "placecell/fleet/robot-a/place/5" in _stored(watcher),
+                            START_S, 0.05)
+            assert {k for k in _stored(watcher)
+                    if k.startswith("placecell/fleet/robot-b/")} == mine, _stored(watcher)
         finally:
             watcher.close()
             for robot in robots:

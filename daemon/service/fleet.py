@@ -193,7 +193,10 @@ class FleetLink:
 
     def _put_own(self, present: set[str]) -> int:
         """This map's own places and its transitions that the storage does not hold
-        (``present``: the keys it answered with). Returns the places put."""
+        (``present``: the keys it answered with), a transition under no robot's name: one
+        taken from the fleet is there under the name of the robot that measured it, and
+        put again under this one's it would be claimed by every robot that took it (at
+        each start, before this rule). Returns the places put."""
         mapper = self.session.mapper
         prefix = self.settings.key_prefix
         with mapper.lock:
@@ -202,10 +205,12 @@ class FleetLink:
         missing = [p for p in own if place_key(prefix, PlaceName(self.robot, p)) not in present]
         for place_id in missing:
             self._put_place(place_id)
+        held = {tuple(chunks[2:]) for chunks in map(self._chunks, present)
+                if len(chunks) == 6 and chunks[1] == "transition"}  # its two places' names
         for t in transitions:
             a, b = self._name(t.from_id), self._name(t.to_id)
             if (a.robot, a.id) < (b.robot, b.id) \
-                    and transition_key(prefix, self.robot, a, b) not in present:
+                    and (a.robot, str(a.id), b.robot, str(b.id)) not in held:
                 self._put_transition(t)
         return len(missing)
 
