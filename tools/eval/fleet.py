@@ -394,7 +394,8 @@ def _own_and_taken(robot: Robot) -> tuple[int, int]:
         return store.place_count() - taken, taken
 
 
-def _segments(path: Path) -> int:
+def segments_in(path: Path) -> int:
+    """The segments of the map file at ``path`` (read only)."""
     with MapStore.open(path, None, readonly=True) as store:
         return len(set(store.load().segments().values()))
 
@@ -480,9 +481,9 @@ def _report(args: argparse.Namespace, a: Robot, b: Robot, c: Robot,
             "places_propagated": len(took),
             "places_learned_a": len(a.of("place_learned")),
             "places_learned_b": len(b.of("place_learned")),
-            "fleet_segments": _segments(c.folder / "map.db"),
-            "segments_a": _segments(a.folder / "map.db"),
-            "segments_b": _segments(b.folder / "map.db"),
+            "fleet_segments": segments_in(c.folder / "map.db"),
+            "segments_a": segments_in(a.folder / "map.db"),
+            "segments_b": segments_in(b.folder / "map.db"),
             "duplicate_places": duplicate_pairs(every),
             "nearest_a_b_places_m": round(min(across), 3) if across else None,
             "router_killed": killed,
