@@ -2,14 +2,10 @@
 
 from __future__ import annotations
 
-import os
+# One BLAS thread, before numpy loads OpenBLAS (kernel/threads.py).
+from kernel.threads import one_blas_thread
 
-# One BLAS thread, set before numpy loads OpenBLAS: the daemon's matrices are small, and
-# OpenBLAS's idle worker threads spin between calls. placecell-bench --only daemon: 0.48
-# of a core in localisation mode with its default threads, 0.24 with one (docs/design.md
-# §13). A deployment may still choose otherwise in the environment.
-for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_name, "1")
+one_blas_thread()
 
 # Two malloc arenas, before any thread starts: each learn left tens of MB in arenas of
 # its own (daemon/service/memory.py, docs/design.md §13).

@@ -2,15 +2,22 @@
 
 from __future__ import annotations
 
-import contextlib
-import shutil
-from collections.abc import Callable, Iterator
-from pathlib import Path
+# One BLAS thread, before numpy loads OpenBLAS (kernel/threads.py): the lock-step tests
+# drive the daemon's Localiser as the daemon runs it, and two workers with OpenBLAS's
+# spinning threads each would fight over two cores.
+from kernel.threads import one_blas_thread
 
-import pytest
+one_blas_thread()
 
-from kernel.se2 import SE2
-from tools.eval.lockstep import Run, lockstep_config
+import contextlib  # noqa: E402 - after the thread setting above
+import shutil  # noqa: E402
+from collections.abc import Callable, Iterator  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import pytest  # noqa: E402
+
+from kernel.se2 import SE2  # noqa: E402
+from tools.eval.lockstep import Run, lockstep_config  # noqa: E402
 
 OfficeMap = Callable[[Path], dict[str, SE2]]
 

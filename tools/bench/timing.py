@@ -7,13 +7,15 @@ import statistics
 import time
 from collections.abc import Callable
 
+from kernel.threads import BLAS_THREAD_VARIABLES
+
 _ENVIRONMENT = dict(os.environ)  # as this process was started, before pin_to_one_core
 
 
 def pin_to_one_core() -> None:
     """Run the benchmark on one core (and tell OpenCV and BLAS to use one thread: BLAS
     reads its setting when numpy is first imported, so call this before that)."""
-    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    for name in BLAS_THREAD_VARIABLES:
         os.environ[name] = "1"
     import cv2
 

@@ -12,16 +12,22 @@ metrics; the text output is the per-seed table of the experiment's ``SEED_COLUMN
 
 from __future__ import annotations
 
-import argparse
-import importlib
-import json
-import logging
-import sys
-from typing import Any
+# One BLAS thread, before numpy loads OpenBLAS (kernel/threads.py): the experiments drive
+# the daemon's Localiser as the daemon runs it.
+from kernel.threads import one_blas_thread
 
-from kernel.camera_models import MODEL_NAMES
-from kernel.errors import PlacecellError
-from tools.eval.seeds import parse_seeds, run_seeds, table
+one_blas_thread()
+
+import argparse  # noqa: E402 - after the thread setting above
+import importlib  # noqa: E402
+import json  # noqa: E402
+import logging  # noqa: E402
+import sys  # noqa: E402
+from typing import Any  # noqa: E402
+
+from kernel.camera_models import MODEL_NAMES  # noqa: E402
+from kernel.errors import PlacecellError  # noqa: E402
+from tools.eval.seeds import parse_seeds, run_seeds, table  # noqa: E402
 
 # experiment -> (module, default world kind, one-line help)
 EXPERIMENTS: dict[str, tuple[str, str, str]] = {
