@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from daemon.localisation.belief import Belief, LocalisationEvent, MapUpdates
+from daemon.localisation.belief import Belief, LocalisationEvent, MapUpdates, PlaceScore
 from daemon.localisation.settings import LocalisationSettings
 from daemon.mapping.acquisition import AcquisitionDecision
 from daemon.mapping.settings import AcquisitionSettings, OdometryNoiseSettings
@@ -162,3 +162,36 @@ def test_a_loss_holds_the_odometry_run_from_the_last_place(tmp_path: Path) -> No
         session.observe(_belief("lost", event=LocalisationEvent(
             "lost", a.id, "sensor", contradicted=True)), MapUpdates())
         assert mapper.begin_place(odo(1.0, 3)) == [], mode
+
+
+def test_a_learn_is_told_of_a_place_the_fleet_gave_where_it_was_learning(
+        tmp_path: Path) -> None:
+    """MappingSession.taken_meanwhile (docs/fleet.md): of the places taken from the fleet,
+    only those taken since the learn began count, each by the autopilot's take-over rule
+    on its lead in the new place's view (the higher of the recognition and coverage
+    margins, 0.05 and 0.08 by default)."""
+    session = _session(tmp_path / "map.db")
+    rng = np.random.default_rng(5)
+
+    def place(label: str):  # type: ignore[no-untyped-def]
+        return synthetic_place(rng, label, n=4, width=64, height=24, margin=0)
+
+    session.adopt_place(place("before"), [], "robot-a", 1)
+    session.begin_place(Odometry(0.0, 0.0, 0.0, 1, 1), None)
+    asked: list[list[int]] = []
+
+    def leads(by_place: dict[int, float]):  # type: ignore[no-untyped-def]
+        def score(ids: list[int]) -> list[PlaceScore]:
+            asked.append(ids)
+            return [PlaceScore(p, 0.9, by_place.get(p, 0.0)) for p in ids]
+        return score
+
+    assert session.taken_meanwhile(leads({})) is None and asked == []  # none taken since
+    [(_, fields)] = session.adopt_place(place("meanwhile"), [], "robot-b", 4)
+    here = fields["place"]
+    assert session.taken_meanwhile(leads({here: 0.08})) == (here, "robot-b")
+    assert asked == [[here]]  # the place taken before the learn began is not looked at
+    assert session.taken_meanwhile(leads({here: 0.079})) is None
+    session.cancel_place()
+    session.begin_place(Odometry(0.0, 0.0, 0.0, 2, 2), None)  # the next learn: taken before
+    assert session.taken_meanwhile(leads({here: 0.5})) is None

@@ -389,13 +389,26 @@ class Localiser:
         prepared = PreparedPanorama.of(to_grey(self.unwarper.unwarp(frame.image)))
         return tuple(self._score_many(prepared, place_ids, estimated))
 
+    def recognise_view(self, panorama: np.ndarray, place_ids: list[int]
+                       ) -> list[PlaceScore]:
+        """Each place's LRP in an unwarped ``panorama`` (with its wrap margin) and its lead
+        over its background, estimated where never measured (as the global search scores
+        places); places not in the map are left out. For the map's owner, from another
+        thread: it reads the map holder's current snapshot, not the frame's."""
+        known = self._holder.current
+        return self._score_many(PreparedPanorama.of(to_grey(panorama)),
+                                [p for p in place_ids if p in known.places], True, known)
+
     def _score_many(self, prepared: PreparedPanorama, place_ids: list[int],
-                    estimated: bool = False) -> list[PlaceScore]:
+                    estimated: bool = False, known: KnownMap | None = None
+                    ) -> list[PlaceScore]:
         """LRP and lead over the background (§9.2) of each place, in one matching pass;
-        ``estimated``: with the backgrounds estimated at learning (the global search)."""
-        known = self.map
+        ``estimated``: with the backgrounds estimated at learning (the global search);
+        ``known``: the map snapshot (this frame's unless given)."""
+        known = self.map if known is None else known
         lrps = self.matcher.lrps(prepared, [known.places[p].templates for p in place_ids])
-        return [PlaceScore(p, lrp, lrp - self._background(p, estimated))
+        return [PlaceScore(p, lrp, lrp - known.background(p, self.settings.background_lrp,
+                                                          estimated))
                 for p, lrp in zip(place_ids, lrps, strict=True)]
 
     def _background(self, place_id: int, estimated: bool) -> float:

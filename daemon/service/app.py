@@ -19,7 +19,7 @@ import numpy as np
 import zenoh
 
 from daemon.config import PlacecellConfig
-from daemon.localisation.belief import MapUpdates
+from daemon.localisation.belief import MapUpdates, PlaceScore
 from daemon.localisation.localiser import Belief, Localiser
 from daemon.service import access, api, queries, status, wire, zenoh_link
 from daemon.service.components import (
@@ -343,7 +343,8 @@ class Daemon:
                            profile=self._place_profile,
                            odometry_timeout_s=self.config.base.read_timeout_s,
                            link_up=lambda: self.supervisor.health["base"].state == "running",
-                           started_by=started_by, mount=self.config.mount)
+                           started_by=started_by, mount=self.config.mount,
+                           recognise=self._recognise_view)
             self._job = job
             job.start()
         localiser = self.processing.localiser
@@ -367,6 +368,11 @@ class Daemon:
     def _place_profile(self, reference_panorama: np.ndarray | None) -> np.ndarray | None:
         localiser = self.processing.localiser
         return None if localiser is None else localiser.place_profile(reference_panorama)
+
+    def _recognise_view(self, panorama: np.ndarray, place_ids: list[int]
+                        ) -> list[PlaceScore]:
+        localiser = self.processing.localiser
+        return [] if localiser is None else localiser.recognise_view(panorama, place_ids)
 
     def _seen(self) -> Seen | None:
         localiser = self.processing.localiser

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from daemon.localisation.belief import PlaceScore
 from daemon.localisation.odometry import OdometryBuffer
 from daemon.mapping.place import Place
 from daemon.mapping.settings import TblSettings
@@ -137,6 +138,7 @@ class BaseCommands:
 
 
 Reply = Callable[[str, dict[str, Any]], None]  # (kind, fields): progress | result | error
+Recogniser = Callable[[np.ndarray, list[int]], list[PlaceScore]]  # panorama, place ids
 
 
 @dataclass(frozen=True)
@@ -163,7 +165,8 @@ class LearnJob:
                  profile: Callable[[np.ndarray | None], np.ndarray | None] = lambda _: None,
                  odometry_timeout_s: float = BaseSettings().read_timeout_s,
                  link_up: Callable[[], bool] = lambda: True,
-                 started_by: str = "operator", mount: Mount | None = None) -> None:
+                 started_by: str = "operator", mount: Mount | None = None,
+                 recognise: Recogniser = lambda _panorama, _ids: []) -> None:
         """``seen``: the localiser's reliable estimate of the robot now, if any (it joins
         the new place to the map, design §6); ``session``: the map's owner, which stores
         the place (daemon/service/mapping_session.py); ``profile``: the local space
@@ -171,13 +174,16 @@ class LearnJob:
         ``odometry_timeout_s`` and ``link_up``: see :class:`FeedSensors`; ``started_by``:
         ``operator`` or ``autopilot`` (autonomous acquisition, which an operator's learn
         pre-empts); ``mount``: where the camera sits (the feed's odometry is the camera's,
-        the moves the robot's)."""
+        the moves the robot's); ``recognise``: places' leads in a panorama
+        (Localiser.recognise_view): an autopilot's learn stores nothing where a place
+        taken from the fleet meanwhile stands out (MappingSession.taken_meanwhile)."""
         self.label = label
         self.mount = mount or Mount()
         self.started_by = started_by
         self._odometry_timeout_s = odometry_timeout_s
         self._link_up = link_up
         self._profile = profile
+        self._recognise = recognise
         self._seen = seen
         self.settings = settings
         self.unwarper = unwarper
@@ -229,6 +235,13 @@ class LearnJob:
                             mount=self.mount)
             if self.abort_requested.is_set():
                 raise LearningAbortedError("learning aborted on request")
+            if self.started_by == "autopilot":
+                here = self.session.taken_meanwhile(
+                    lambda ids: self._recognise(tbl.reference_panorama, ids))
+                if here is not None:
+                    raise LearningRefusedError(
+                        f"place {here[0]}, robot {here[1]}'s, was taken from the fleet here "
+                        "while this one was driven; nothing stored: the robot goes on in it")
             driven = time.perf_counter()  # what the robot waits for after the drive
             self._reply("progress", {"phase": "storing", "fraction": 1.0})
             place = Place(tbl.result(), tbl.reference_panorama, label=self.label,
