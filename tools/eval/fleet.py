@@ -30,7 +30,9 @@ the place it names; None otherwise), ``robot_c_places_learned``,
 fleet), ``duplicate_places`` (pairs of places learned by any robot whose true references
 stand within 0.3 m), ``router_kill_places_lost`` (places A and B learned that neither
 router's storage holds at the end) and ``router_caught_up`` (both storages hold the same
-samples, byte for byte).
+samples, byte for byte); ``learn_failures`` (learns that ended storing nothing, but those
+refused) and ``learns_refused`` (an autopilot's learn that, at the end of its drive, found
+a place another robot had learned there meanwhile: docs/fleet.md).
 """
 
 from __future__ import annotations
@@ -73,6 +75,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--overlap-m", type=float, default=3.0,
                         help="how much of the tour both A and B drive")
     parser.add_argument("--speed", type=float, default=0.3, help="the autopilot's m/s")
+    parser.add_argument("--b-after-s", type=float, default=0.0,
+                        help="robot B starts this long after robot A (with --overlap-m "
+                             "equal to --stretch-m both drive one way: B comes to each of "
+                             "A's spots this much later, while A may still be learning)")
     parser.add_argument("--c-drive-m", type=float, default=2.0,
                         help="how far robot C drives along B's way once it has started")
     parser.add_argument("--kill-after-places", type=int, default=2,
@@ -330,6 +336,7 @@ def _run(args: argparse.Namespace, folder: Path, stack: ExitStack, a_way: list[P
         robot.write(args.start_s)
     started = time.monotonic()
     stack.enter_context(a.running(args.timeout_s))
+    time.sleep(args.b_after_s)
     stack.enter_context(b.running(args.timeout_s))
     killed = _kill_during_tour(args, a, b, r2)
     wait_until("A's and B's tours", lambda: a.done() and b.done(),
@@ -467,7 +474,8 @@ def _report(args: argparse.Namespace, a: Robot, b: Robot, c: Robot,
         "config": {"stretch_m": args.stretch_m, "overlap_m": args.overlap_m,
                    "speed_m_s": args.speed, "c_drive_m": args.c_drive_m,
                    "kill_after_places": args.kill_after_places,
-                   "router_down_s": args.router_down_s, "folder": str(folder)},
+                   "router_down_s": args.router_down_s, "b_after_s": args.b_after_s,
+                   "folder": str(folder)},
         "metrics": {
             "robot_c_frames_to_tracking": frames,
             "robot_c_first_tracking_error_m": (None if first_error is None
@@ -489,7 +497,10 @@ def _report(args: argparse.Namespace, a: Robot, b: Robot, c: Robot,
             "router_killed": killed,
             "router_kill_places_lost": len(learned_keys - held),
             "router_caught_up": caught_up,
-            "learn_failures": sum(len(r.of("learning_ended")) for r in (a, b, c)),
+            "learn_failures": sum(e.get("code") != "refused" for r in (a, b, c)
+                                  for e in r.of("learning_ended")),
+            "learns_refused": sum(e.get("code") == "refused" for r in (a, b, c)
+                                  for e in r.of("learning_ended")),
             "tours_s": round(tours_s, 1),
             **{f"{key}_{r.name[-1]}": value for r in (a, b, c)
                for key, value in (("tracking_right_fraction",
