@@ -402,19 +402,15 @@ class Localiser:
     def _score_many(self, prepared: PreparedPanorama, place_ids: list[int],
                     estimated: bool = False, known: KnownMap | None = None
                     ) -> list[PlaceScore]:
-        """LRP and lead over the background (§9.2) of each place, in one matching pass;
-        ``estimated``: with the backgrounds estimated at learning (the global search);
-        ``known``: the map snapshot (this frame's unless given)."""
+        """LRP and lead over the background (§9.2, KnownMap.background) of each place, in
+        one matching pass; ``estimated``: with the backgrounds estimated at learning (the
+        global search, which compares every place with every other); ``known``: the map
+        snapshot (this frame's unless given)."""
         known = self.map if known is None else known
         lrps = self.matcher.lrps(prepared, [known.places[p].templates for p in place_ids])
         return [PlaceScore(p, lrp, lrp - known.background(p, self.settings.background_lrp,
                                                           estimated))
                 for p, lrp in zip(place_ids, lrps, strict=True)]
-
-    def _background(self, place_id: int, estimated: bool) -> float:
-        """The place's background LRP (KnownMap.background): ``estimated`` for the global
-        search, which compares every place with every other."""
-        return self.map.background(place_id, self.settings.background_lrp, estimated)
 
     # ------------------------------------------------------------------ global (§9)
     def _supervise(self, prepare: Callable[[], PreparedPanorama], grey: np.ndarray,
