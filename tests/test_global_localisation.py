@@ -96,6 +96,23 @@ def test_a_place_leading_the_search_three_frames_in_a_row_is_a_loss() -> None:
     assert not any(never.observe(search, 2, PLACES, True) for _ in range(10))
 
 
+def test_a_neighbour_leading_the_search_is_no_loss() -> None:
+    """A place joined to the current one by a transition leading it is left to the
+    switcher (§8.2); a place beyond it leading is still a loss, with the neighbour
+    ahead of it too."""
+    search = PlaceSearch(LocalisationSettings(search_places_per_frame=100))
+    watch = LeadWatch(LocalisationSettings(led_frames=3, search_margin=0.05))
+    search.reset(0)
+    leads = {2: 0.10, 5: 0.30}
+    search.observe([PlaceScore(p, 0.7, leads.get(p, 0.0)) for p in PLACES])
+    assert not any(watch.observe(search, 2, PLACES, True, neighbours=(5,))
+                   for _ in range(5))
+    leads[3] = 0.20  # a place two on leads too (office 2: tracked in a place it had left)
+    search.observe([PlaceScore(p, 0.7, leads.get(p, 0.0)) for p in PLACES])
+    assert [watch.observe(search, 2, PLACES, True, neighbours=(5,))
+            for _ in range(3)] == [False, False, True]
+
+
 def test_a_loss_is_declared_on_the_fifth_low_frame_in_a_row() -> None:
     loss = LossDetector(LocalisationSettings(loss_output=0.15, loss_frames=5))
     assert [loss.observe(c) for c in (0.1, 0.1, 0.5, 0.1, 0.1, 0.1, 0.1)] == [False] * 7

@@ -206,3 +206,27 @@ def test_a_place_handed_over_from_a_guess_is_confirmed_before_it_is_tracked() ->
     events = _frames(machine, t, S.confirm_frames, 0.2, False, places, 3, 11)
     assert not any(events) and t.calls == []
     assert machine.mode == "search" and machine.search.rejected == {3}
+
+
+def test_a_switch_to_a_neighbour_starts_the_lead_watch_over() -> None:
+    """The output fading as the robot leaves a place runs the background search, where
+    another place may lead for a frame or two before the switcher carries the estimate
+    over (a neighbour switch): the run of led frames counted against the place left is
+    not held against the new one."""
+    places = [1, 2, 3]
+    machine = Relocalisation(S)
+    machine.told(0, 0, None)
+    t = Scripted(machine, {1: 0.0, 2: S.search_margin + 0.05})
+    # Low output: the search runs; place 2 leads place 1 for all but the last led frame.
+    events = _frames(machine, t, S.led_frames - 1, 0.1, True, places, 1, 1)
+    assert not any(events) and machine.lead_watch.frames == S.led_frames - 1
+    machine.switched()  # into place 2, over the transition
+    assert machine.lead_watch.frames == 0 and machine.mode == "track"
+    events = _frames(machine, t, S.led_frames, 0.1, True, places, 2, 10)
+    assert not any(events) and machine.mode == "track"  # place 2 leads no one here
+    # Without the switch the same frames are a loss by the lead.
+    machine = Relocalisation(S)
+    machine.told(0, 0, None)
+    t = Scripted(machine, {1: 0.0, 2: S.search_margin + 0.05})
+    events = [e for e in _frames(machine, t, S.led_frames, 0.1, True, places, 1, 1) if e]
+    assert len(events) == 1 and "another place led" in events[0].how

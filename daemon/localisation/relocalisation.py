@@ -195,6 +195,7 @@ class Relocalisation:
         carried that to place 1 half a second later, and a place learned then was
         joined to place 1 by it, the lap's cycle never closed)."""
         self.loss.reset()
+        self.lead_watch.reset()
         self.guessing = guessed or self.guessing
         self.found_frames = 0
 
@@ -272,7 +273,8 @@ class Relocalisation:
         elif self.mode == "track":
             self.search.reset(None)  # confident again: no background search
         if self.mode == "track":
-            led = self.lead_watch.observe(self.search, current, places, bool(scored))
+            led = self.lead_watch.observe(self.search, current, places, bool(scored),
+                                          neighbours)
             if after_tracking(lost_now, led) == "track":
                 return Supervised(scored)
             self.episode = (stamp_ns, frame)
