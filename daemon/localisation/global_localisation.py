@@ -238,8 +238,8 @@ class LeadWatch:
         """``searched``: the search ran in this frame (a frame without it breaks the
         run); ``neighbours``: the current place's. True once the run reaches
         ``led_frames``."""
-        others = [p for p in places if p not in neighbours]
-        led = searched and search.leader_over(current, others) is not None
+        led = searched and search.leader_over(
+            current, [p for p in places if p not in neighbours]) is not None
         self.frames = self.frames + 1 if led else 0
         return 0 < self.settings.led_frames <= self.frames
 
