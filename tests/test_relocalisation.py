@@ -11,6 +11,7 @@ from daemon.localisation.relocalisation import (
     after_recovering,
     after_tracking,
     contradicted,
+    left_view,
     loss_contradicts,
 )
 from daemon.localisation.settings import LocalisationSettings
@@ -74,8 +75,8 @@ class Scripted:
     def spread(self, step: int) -> None:
         self.calls.append(("spread", step))
 
-    def lost(self, by_sensor: bool) -> None:
-        self.calls.append(("lost", int(by_sensor)))
+    def lost(self, left: bool) -> None:
+        self.calls.append(("lost", int(left)))
 
 
 def _frames(machine: Relocalisation, t: Scripted, n: int, support: float, found: bool,
@@ -101,7 +102,7 @@ def test_a_loss_goes_through_both_recovery_steps_then_to_the_best_place_elsewher
     assert lost.kind == "lost" and lost.place_id == 1 and "sensor output" in lost.how
     assert lost.contradicted  # the view said no: maybe carried off
     assert machine.mode == "recover" and machine.step == 1
-    assert t.calls == [("lost", 1), ("spread", 1)]
+    assert t.calls == [("lost", 0), ("spread", 1)]  # no bridge from before a carry
     _frames(machine, t, S.recovery_frames, 0.01, False, places, 1, 10)
     assert machine.step == 2 and t.calls[-1] == ("spread", 2)
     _frames(machine, t, S.recovery_frames, 0.01, False, places, 1, 20)
@@ -143,14 +144,34 @@ def test_a_rejected_pick_searches_on_without_it_and_found_again_in_step_one() ->
 
 
 def test_a_loss_contradicts_odometry_only_after_the_robot_was_found_and_not_blind() -> None:
-    assert loss_contradicts(by_sensor=True, blind=False, guessing=False)
-    assert loss_contradicts(by_sensor=False, blind=True, guessing=False)  # a leader
-    assert not loss_contradicts(by_sensor=True, blind=True, guessing=False)
-    assert not loss_contradicts(by_sensor=True, blind=False, guessing=True)
-    assert not loss_contradicts(by_sensor=False, blind=False, guessing=True)
-    # an output that only faded: the robot drove out of the place's range
-    assert not loss_contradicts(by_sensor=True, blind=False, guessing=False, faded=True)
-    assert loss_contradicts(by_sensor=False, blind=False, guessing=False, faded=True)
+    assert loss_contradicts(left=False, guessing=False)
+    assert not loss_contradicts(left=True, guessing=False)
+    assert not loss_contradicts(left=False, guessing=True)
+    assert not left_view(by_sensor=True, blind=False, only_faded=False)  # the view said no
+    assert not left_view(by_sensor=False, blind=True, only_faded=False)  # a leader
+    assert left_view(by_sensor=True, blind=True, only_faded=False)  # no evidence either way
+    # an output that only faded: the robot drove out of the place's range, whichever
+    # rule declared it
+    assert left_view(by_sensor=True, blind=False, only_faded=True)
+    assert left_view(by_sensor=False, blind=False, only_faded=True)
+
+
+def test_a_leader_while_the_view_only_fades_is_a_loss_the_robot_drove_into() -> None:
+    """Another place (of another segment, no transition) leading the search while the
+    output only fades — never below doubt_output — is the robot driving into its view:
+    lost by the lead, but not contradicted, and the last fix may bridge to it; the same
+    lead with the view contradicting the estimate (a carry) leaves no bridge."""
+    places = [1, 2, 3]
+    fading = (S.doubt_output + S.loss_output) / 2
+    for support, left in ((fading, True), (S.doubt_output / 2, False)):
+        machine = Relocalisation(S)
+        machine.told(0, 0, None)
+        t = Scripted(machine, {1: -0.2, 2: 0.3, 3: -0.3})
+        events = [e for e in _frames(machine, t, S.loss_frames, support, False, places, 1, 1)
+                  if e]
+        assert len(events) == 1 and "another place led" in events[0].how
+        assert events[0].contradicted is not left
+        assert t.calls == [("lost", int(left)), ("start_in", 2)]
 
 
 def test_a_loss_of_a_tracker_started_from_a_guess_is_no_evidence_of_a_kidnap() -> None:

@@ -438,12 +438,14 @@ class Localiser:
                               0.0 if self._learning else travelled_m, stamp_ns, self._frames)
         return out.scores, out.event
 
-    def _lost(self, by_sensor: bool) -> None:
+    def _lost(self, left: bool) -> None:
         """A loss declared: the last fix bridges to the place found next only when the
-        robot left the place's view on its own (a loss by the sensor output, away from
-        the reference); carried off where the place is in view, or another place leading
-        the search: no bridge."""
-        if not by_sensor or _near_reference(self.tracker, self.settings.bridge_from_m):
+        robot ``left`` the place's view on its own (relocalisation.left_view: blind
+        travel, or an output that only faded, whether the output rule or another place
+        leading the search declared it), away from the reference; a view that
+        contradicted the estimate (carried off?), or a loss where the place is in view:
+        no bridge — odometry cannot see a carry, and the transition would be wrong."""
+        if not left or _near_reference(self.tracker, self.settings.bridge_from_m):
             self._fix = None
 
     def _tell_apart(self, grey: np.ndarray, best: int, places: list[int],
@@ -778,8 +780,8 @@ class _FrameTrackers:
     def spread(self, step: int) -> None:
         self._localiser._spread(self._grey, step)
 
-    def lost(self, by_sensor: bool) -> None:
-        self._localiser._lost(by_sensor)
+    def lost(self, left: bool) -> None:
+        self._localiser._lost(left)
 
 
 def _merged(*groups: tuple[PlaceScore, ...] | list[PlaceScore]) -> tuple[PlaceScore, ...]:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from typing import Literal, Protocol
 
 from daemon.localisation.belief import LocalisationEvent, PlaceScore
-from daemon.localisation.global_localisation import LeadWatch, LossDetector, PlaceSearch
+from daemon.localisation.global_localisation import LeadWatch, LossDetector, PlaceSearch, faded
 from daemon.localisation.settings import LocalisationSettings
 
 Mode = Literal["search", "confirm", "track", "recover"]
@@ -76,20 +76,30 @@ def contradicted(support: float | None, confidence: float,
     return confidence <= 0.0 or (support is not None and support < settings.doubt_output)
 
 
-def loss_contradicts(by_sensor: bool, blind: bool, guessing: bool,
-                     faded: bool = False) -> bool:
+def left_view(by_sensor: bool, blind: bool, only_faded: bool) -> bool:
+    """Whether a loss is the robot leaving the place's view on its own, its estimate right
+    up to it: no evidence over blind travel (the output rule's blind clause), or a view
+    that ``only_faded`` (``global_localisation.faded``: through the run of low frames the
+    output never fell below ``doubt_output``) — whichever rule declared the loss, the
+    output or another place leading the search. Office 5's endurance run drove from a
+    place of one segment into the view of another's, 0.02 m off, the output fading
+    (0.12-0.14), and was lost by the lead twice: no transition joined the segments
+    (issue 31). A robot carried off gives 0.00-0.02 at once (offices 1-5's kidnaps)."""
+    return (by_sensor and blind) or only_faded
+
+
+def loss_contradicts(left: bool, guessing: bool) -> bool:
     """Whether a loss is evidence the robot may have been carried off (the odometry run
     from the last place learned then measures nothing, design §6): the view contradicted
-    the estimate — by the sensor output or by another place leading the search — but
-    not after blind travel (no evidence either way), not when the output only faded
-    (``global_localisation.faded``: the robot drove out of the place's range), and not
-    while the tracker started from a guess has not yet found the robot: then the guess
-    was wrong, not the odometry (cyclic over ROS 2, notes of 2026-12-06: a switch coming
-    round the loop started 2 m off, was lost 5 frames later, and the place learned next
-    lost its link)."""
-    if guessing:
-        return False
-    return not (by_sensor and (blind or faded))
+    the estimate — by the sensor output or by another place leading the search — unless
+    the robot ``left`` the place's view on its own (:func:`left_view`: on office 3 the
+    mapping robot lost each place it had just learned 0.8-1 m on, output 0.07-0.14, and
+    holding the odometry to the next place split its map), and not while the tracker
+    started from a guess has not yet found the robot: then the guess was wrong, not the
+    odometry (cyclic over ROS 2, notes of 2026-12-06: a switch coming round the loop
+    started 2 m off, was lost 5 frames later, and the place learned next lost its
+    link)."""
+    return not (guessing or left)
 
 
 # ------------------------------------------------------------------ the machine
@@ -109,9 +119,10 @@ class Trackers(Protocol):
         the machine then waits for the estimate to confirm it."""
         ...
 
-    def lost(self, by_sensor: bool) -> None:
-        """A loss was just declared (``by_sensor``: the sensor output, else another place
-        leading the search), before any recovery starts."""
+    def lost(self, left: bool) -> None:
+        """A loss was just declared, before any recovery starts; ``left``: the robot left
+        the place's view on its own (:func:`left_view`), the last estimate a fix to
+        build on."""
         ...
 
     def spread(self, step: int) -> None:
@@ -278,13 +289,13 @@ class Relocalisation:
             if after_tracking(lost_now, led) == "track":
                 return Supervised(scored)
             self.episode = (stamp_ns, frame)
+            left = left_view(lost_now, self.loss.blind, self.loss.faded if lost_now
+                             else faded(self.loss.least_low, s))
             event = LocalisationEvent("lost", current, self.loss.why if lost_now else
                                       f"another place led the search by "
                                       f"{s.search_margin} for {s.led_frames} frames",
-                                      contradicted=loss_contradicts(
-                                          lost_now, self.loss.blind, self.guessing,
-                                          self.loss.faded))
-            trackers.lost(by_sensor=lost_now)
+                                      contradicted=loss_contradicts(left, self.guessing))
+            trackers.lost(left)
             self.lead_watch.reset()
             leader = self.leader(trackers, current, places)
             if leader is not None:
