@@ -8,6 +8,7 @@ import math
 
 import pytest
 
+from daemon.localisation.acquisition_watch import reference_in_odometry
 from daemon.mapping.acquisition import (
     AcquisitionDecision,
     BackgroundMeter,
@@ -200,3 +201,40 @@ def test_the_early_decision_follows_the_lrp_here_not_half_a_window_behind() -> N
     assert here is not None and here <= SETTINGS.min_distance_m + 2 * SETTINGS.sample_step_m
     lagging = decide(AcquisitionSettings(enabled=True, coverage_window_m=SETTINGS.window_m))
     assert lagging is not None and lagging >= 0.9
+
+
+def test_a_watch_begun_past_the_place_counts_from_its_reference() -> None:
+    """A restart resumed 0.7 m past place 5 (its reference at x = 0): given where the
+    reference stands, the distances count from it and the coverage rule needs only its
+    own short window — the decision comes at the distance it would have come at had the
+    place been watched all along (here min_distance_m, 0.75 m), where counting from the
+    restart waited for min_distance_m more and a full window (1.45 m)."""
+    def lrp(x: float) -> float:
+        return 0.74 + 0.21 * math.exp(-x / 0.7)
+
+    def decide(reference: Odometry | None) -> tuple[float, float] | None:
+        acq = PlaceAcquisition(SETTINGS)
+        acq.reset(5, expected_background=0.74, reference=reference)
+        for i in range(70, 500):
+            x = 0.01 * i
+            decision = acq.observe(lrp(x), Odometry(x, 0.0, 0.0, i, i))
+            if decision is not None:
+                return x, decision.away_m
+        return None
+
+    seeded = decide(Odometry(0.0, 0.0, 0.0, 0, 0))
+    assert seeded is not None
+    at, away = seeded
+    assert SETTINGS.min_distance_m <= at <= SETTINGS.min_distance_m + 0.2
+    assert away == pytest.approx(at, abs=0.01)  # from the reference, not the restart
+    unseeded = decide(None)
+    assert unseeded is not None and unseeded[0] >= 0.7 + SETTINGS.min_distance_m
+
+
+def test_the_reference_in_the_odometry_frame_is_behind_the_robot_by_its_estimate() -> None:
+    # Robot at odometry (2, 1) heading +y, 0.5 m ahead of the place's reference along
+    # its heading and turned 90 degrees from it: the reference is 0.5 m behind, at (2, 0.5),
+    # and the place's x axis points along odometry +x.
+    ref = reference_in_odometry(Odometry(2.0, 1.0, math.pi / 2, 7, 3), (0.0, 0.5, math.pi / 2))
+    assert (ref.x, ref.y) == (pytest.approx(2.0), pytest.approx(0.5))
+    assert ref.yaw == pytest.approx(0.0, abs=1e-12) and (ref.stamp_ns, ref.seq) == (7, 3)

@@ -29,7 +29,7 @@ from daemon.mapping.acquisition import (
 from daemon.mapping.settings import AcquisitionSettings
 from daemon.vision.recognition import FastMatcher, PreparedPanorama, PreparedTemplates
 from daemon.vision.signature import signature, similarity
-from kernel.se2 import UncertainSE2
+from kernel.se2 import SE2, UncertainSE2
 from kernel.types import Odometry
 
 # LRP and lead over the estimated background (§9.2) of some places in this frame.
@@ -80,6 +80,14 @@ def revisitable(known: KnownMap, watched: int, tracked: Tracked, within_m: float
     return [p for p in known.places if p not in (watched, tracked.place_id) and p not in near]
 
 
+def reference_in_odometry(odo: Odometry, pose: tuple[float, float, float]) -> Odometry:
+    """Where the reference of the place the robot is tracked in stands in the odometry
+    frame: T_odom_place = T_odom_robot ∘ T_place_robot⁻¹ (``pose``: the estimate in the
+    place), stamped as ``odo``."""
+    ref = SE2(odo.x, odo.y, odo.yaw).compose(SE2.of(pose).inverse())
+    return Odometry(ref.x, ref.y, ref.yaw, odo.stamp_ns, odo.seq)
+
+
 class AcquisitionWatch:
     def __init__(self, settings: AcquisitionSettings, matcher: FastMatcher,
                  wrap_margin: int, default_background: float) -> None:
@@ -93,6 +101,7 @@ class AcquisitionWatch:
         self._watched_learned = False  # learned where it began to be watched (its reference)
         self._watch_next: int | None = None  # set from other threads
         self._meters: list[BackgroundMeter] = []  # places being left behind
+        self._fresh = True  # no place watched yet: a start on the map (a restart)
 
     def watch_next(self, place_id: int) -> None:
         """Watch ``place_id`` (the one just learned) from the next frame on. Safe to call
@@ -120,8 +129,15 @@ class AcquisitionWatch:
             # Nothing watched and no place coming: after a restart on a map with places,
             # or a decision whose learn did not happen. The place the robot is tracked
             # in is watched from here, so acquisition goes on (never a "first" place on
-            # a map that has places: issue 31).
+            # a map that has places: issue 31) — after a restart, from its reference: the
+            # robot may stand well past it (office 3 resumed 0.7 m past a place, and
+            # counting the distances from there left 1.34 m to the next place, a stretch
+            # where neither stood out).
+            fresh = self._fresh
             self._watch(known, tracked.place_id, learned=False)
+            if fresh and tracked.pose is not None and odo is not None:
+                self.acquisition.reset(tracked.place_id,
+                                       reference=reference_in_odometry(odo, tracked.pose))
         if self._watched is None and not self._meters:
             return WatchStep()
         prepared = prepare()
@@ -196,6 +212,7 @@ class AcquisitionWatch:
         is where the watch begins), or a known place taken over."""
         self._watched = (place_id, known.places[place_id].templates)
         self._watched_learned = learned
+        self._fresh = False
         self.acquisition.reset(place_id)
 
     def _most_like_view(self, known: KnownMap, grey: np.ndarray, candidates: list[int]

@@ -51,11 +51,17 @@ class PlaceAcquisition:
         self.place_id: int | None = None
         self.reset(None)
 
-    def reset(self, place_id: int | None, expected_background: float | None = None) -> None:
+    def reset(self, place_id: int | None, expected_background: float | None = None,
+              reference: Odometry | None = None) -> None:
         """Watch ``place_id`` from here on (None: no place to watch). ``expected_background``:
         the background LRP the place is expected to settle at (see ``_decide``; the
-        caller may update it as estimates come in)."""
+        caller may update it as estimates come in). ``reference``: where the place's
+        reference stands in the odometry frame, when the watch begins away from it (a
+        restart resumed 0.7 m past the place): the distances count from there, and the
+        coverage rule needs only its own short window of samples (the LRP nearer the
+        place went unseen); None: from where the watch begins."""
         self.place_id = place_id
+        self.reference = reference
         self.expected_background = expected_background
         self.distance_m = 0.0
         self._since_sample = 0.0
@@ -64,7 +70,9 @@ class PlaceAcquisition:
         self._smooth: deque[float] = deque(maxlen=self._n + 1)  # LRP'
         self._slope: deque[float] = deque(maxlen=self._n)  # s_i
         self._last: Odometry | None = None
-        self.origin: Odometry | None = None  # the first odometry while watching the place
+        # Where distances count from: the place's reference, or the first odometry while
+        # watching the place.
+        self.origin: Odometry | None = reference
         self.smoothed_lrp: float | None = None
         self.smoothed_slope: float | None = None
 
@@ -74,7 +82,10 @@ class PlaceAcquisition:
             return None
         last, self._last = self._last, odometry
         if last is None:
-            self.origin = odometry
+            if self.origin is None:
+                self.origin = odometry
+            else:  # begun away from the reference: as far from it as travelled
+                self.distance_m = _apart(odometry, self.origin)
             return None
         step = _apart(odometry, last)
         if step < 1e-4:  # stationary or turning on the spot: no new information
@@ -97,9 +108,11 @@ class PlaceAcquisition:
         if len(self._smooth) > self._n:
             self._slope.append(abs(self._smooth[-1] - self._smooth[0]))  # s_i
             self.smoothed_slope = sum(self._slope) / len(self._slope)
-        if self.distance_m < s.min_distance_m or len(self._lrp) < self._n \
-                or self._away() < s.min_distance_m:  # a tour turning back near the place
-            return None
+        # The LRP here, over a short window (below).
+        k = max(1, min(self._n, int(round(s.coverage_window_m / s.sample_step_m))))
+        if self.distance_m < s.min_distance_m or self._away() < s.min_distance_m \
+                or len(self._lrp) < (k if self.reference is not None else self._n):
+            return None  # too near, or a tour turning back near the place
         assert self.place_id is not None
         if m < self.default_background:  # below the default background: reached at once
             return self._decision(m, m)
@@ -110,7 +123,6 @@ class PlaceAcquisition:
         # half a window behind, and where a place is recognised only ~0.45 m about it
         # the next place came too late (corridor 1: the LRP here was 0.73, under the
         # expected background of 0.75, by the time the average came down to 0.83).
-        k = max(1, min(len(self._lrp), int(round(s.coverage_window_m / s.sample_step_m))))
         recent = sum(list(self._lrp)[-k:]) / k
         expected = self.expected_background
         if expected is not None and s.coverage_margin > 0 \
@@ -123,7 +135,8 @@ class PlaceAcquisition:
         return None
 
     def _away(self) -> float:
-        """How far the robot stands from where it began watching the place (odometry)."""
+        """How far the robot stands from ``origin`` (odometry): the place's reference, or
+        where the watch began."""
         origin, here = self.origin, self._last
         return 0.0 if origin is None or here is None else _apart(here, origin)
 
