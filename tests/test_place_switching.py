@@ -11,6 +11,9 @@ from daemon.localisation.belief import PlaceScore
 from daemon.localisation.place_switching import (
     CycleClosure,
     PlaceSwitcher,
+    Switch,
+    beyond,
+    carried_over,
     nearest_place,
     places_near,
 )
@@ -60,6 +63,36 @@ def test_a_place_without_transition_needs_a_streak_and_a_clear_lead() -> None:
     # Leading, but not standing cycle_min_lead above its own background: never.
     weak = scores(p4=-0.02, p3=-0.05, p1=0.13)
     assert all(sw.decide(4, [3], weak) is None for _ in range(5))
+
+
+def test_a_place_the_map_puts_far_from_the_estimate_never_starts_a_streak() -> None:
+    """Office 5: tracked 0.01 m off in a place, the robot was handed over to a look-alike
+    the map's transitions put 9 m away. Place 1 is 9 m off by the graph (drift 0.2 m),
+    place 5 2 m off: only place 5's lead counts; place 6, which no path reaches, is not
+    ruled out."""
+    through = {3: UncertainSE2(SE2(1.0, 0.0, 0.0), np.diag([1e-4, 1e-4, 1e-4])),
+               1: UncertainSE2(SE2(9.0, 0.0, 0.0), np.diag([0.01, 0.01, 1e-3])),
+               5: UncertainSE2(SE2(0.0, 2.0, 0.0), np.diag([0.01, 0.01, 1e-3]))}
+    far = beyond(4, (0.0, 0.0, 0.0), through, S.cycle_within_m)
+    assert far == {1}
+    assert beyond(4, (0.0, 0.0, 0.0), through, 0.0) == set()  # 0: no limit
+    sw = PlaceSwitcher(S)
+    assert all(sw.decide(4, [3], scores(p4=0.0, p3=0.01, p1=0.25), far=far) is None
+               for _ in range(5))
+    for leader in (5, 6):
+        sw = PlaceSwitcher(S)
+        strong = scores(p4=0.0, p3=0.01, p1=0.25, **{f"p{leader}": 0.3})
+        switches = [sw.decide(4, [3], strong, far=far) for _ in range(S.cycle_checks)]
+        assert switches[-1] is not None and switches[-1].place_id == leader
+
+
+def test_a_switch_to_a_place_the_graph_reaches_carries_the_estimate() -> None:
+    through = {3: UncertainSE2(SE2(1.0, 0.0, 0.0), np.diag([1e-4, 1e-4, 1e-4])),
+               7: UncertainSE2(SE2(2.0, 0.5, 0.0), np.diag([0.01, 0.01, 1e-3]))}
+    assert carried_over(Switch("neighbour", 3), through)
+    assert carried_over(Switch("graph", 7), through)
+    assert carried_over(Switch("cycle", 7), through)  # a streak's lead, the graph reaches it
+    assert not carried_over(Switch("cycle", 9), through)  # no path: from its reference
 
 
 def test_other_places_are_tried_in_turn() -> None:

@@ -48,6 +48,8 @@ from daemon.localisation.odometry import OdometryBuffer, relative_motion
 from daemon.localisation.place_switching import (
     CycleClosure,
     PlaceSwitcher,
+    beyond,
+    carried_over,
     reliable,
 )
 from daemon.localisation.relocalisation import Mode, Relocalisation, contradicted
@@ -611,13 +613,14 @@ class Localiser:
                 and distance[p] <= self.settings.cycle_near_m]
         checked = self.switcher.to_check(current, neighbours, list(self.map.places), near)
         scores = self._score_many(prepared, checked)
-        switch = self.switcher.decide(current, neighbours, scores, distance, near)
+        switch = self.switcher.decide(current, neighbours, scores, distance, near, beyond(
+            current, estimate.pose, through, self.settings.cycle_within_m))
         if switch is None:
             return tuple(scores), None
         here = UncertainSE2(SE2.of(estimate.pose), estimate.covariance)
         target = self.map.places[switch.place_id].place
         tracker = PlaceTracker(target, self.settings, self.model, self.rng, self.mount)
-        if switch.kind in ("neighbour", "graph"):
+        if carried_over(switch, through):
             # §8.2, eq. 8.35: the pose in the neighbour's frame, T_to_robot = T_from_to⁻¹ ∘
             # T_from_robot; the particles spread over both uncertainties. A place with no
             # transition from here is reached through the graph's path to it (its drift

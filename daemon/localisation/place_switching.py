@@ -56,12 +56,14 @@ class PlaceSwitcher:
         return [current, *neighbours, *near, *chosen]
 
     def decide(self, current: int, neighbours: list[int], scores: list[PlaceScore],
-               distance: dict[int, float] | None = None, near: list[int] | None = None
-               ) -> Switch | None:
+               distance: dict[int, float] | None = None, near: list[int] | None = None,
+               far: set[int] | frozenset[int] = frozenset()) -> Switch | None:
         """``distance``: from the estimate to the reference of the current place and of
         other places reached through the transitions (neighbours directly, others along
         the graph: a loop's places through the drifted sum round it). ``near``: places
-        with no transition from here that the graph puts within ``cycle_near_m``."""
+        with no transition from here that the graph puts within ``cycle_near_m``;
+        ``far``: places it puts beyond ``cycle_within_m`` (:func:`beyond`), look-alikes
+        whose lead never starts a streak."""
         s = self.settings
         lead = {sc.place_id: sc.lead for sc in scores}
         here = lead.get(current, -1.0)
@@ -84,7 +86,8 @@ class PlaceSwitcher:
             self._streak = None
             return Switch("neighbour" if best_nb in neighbours else "graph", best_nb)
         ceiling = max([here] + [lead[p] for p in neighbours if p in lead])
-        others = [sc for sc in scores if sc.place_id != current and sc.place_id not in neighbours]
+        others = [sc for sc in scores if sc.place_id != current
+                  and sc.place_id not in neighbours and sc.place_id not in far]
         # Coming round a loop: the graph puts a place without a transition from here
         # within cycle_near_m, and it is recognised above everything nearer by the graph.
         coming_round = [sc for sc in others if dist.get(sc.place_id, math.inf) <= s.cycle_near_m
@@ -107,6 +110,16 @@ class PlaceSwitcher:
         return None
 
 
+def carried_over(switch: Switch, through: dict[int, UncertainSE2]) -> bool:
+    """Whether the estimate passes to the switch's place through the map's transitions
+    (T_current_p in ``through``) — to a neighbour, along a path of them, and also after
+    a streak's lead (a "cycle" switch) to a place the graph reaches — rather than
+    starting over around the place's reference (σ ``recovery_sigma_m``): started so,
+    office 1's tracker settled 1.36 m off in a place two transitions away, published
+    tracking, and its cycle was stored."""
+    return switch.kind in ("neighbour", "graph") or switch.place_id in through
+
+
 def places_near(current: int, pose: tuple[float, float, float],
                 through: dict[int, UncertainSE2], within_m: float) -> set[int]:
     """The places whose reference lies within ``within_m`` of ``pose`` (an estimate in
@@ -120,6 +133,17 @@ def places_near(current: int, pose: tuple[float, float, float],
         if math.hypot(T.mean.x - x, T.mean.y - y) <= within_m + drift:
             near.add(pid)
     return near
+
+
+def beyond(current: int, pose: tuple[float, float, float],
+           through: dict[int, UncertainSE2], within_m: float) -> set[int]:
+    """The places the map's transitions put farther than ``within_m`` from ``pose`` (an
+    estimate in place ``current``), the path's drift at 2 sigma allowed: where the map
+    says the robot is not (:func:`places_near`'s complement among those reached; a place
+    no path reaches is not among them). ``within_m`` 0: none."""
+    if within_m <= 0:
+        return set()
+    return set(through) - places_near(current, pose, through, within_m)
 
 
 def nearest_place(current: int, pose: tuple[float, float, float],

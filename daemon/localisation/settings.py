@@ -94,6 +94,13 @@ class LocalisationSettings:
                                   "place's reference) closes the cycle as soon as it is "
                                   "recognised above the current place and its neighbours")
     cycle_checks: int = setting(3, ge=1, le=100, doc="see cycle_margin")
+    cycle_within_m: float = setting(3.0, ge=0.0, le=1000.0, doc="a place with no "
+                                    "transition from here that the transitions put "
+                                    "farther than this from the estimate (2 sigma of the "
+                                    "path's drift allowed) is a look-alike: never switched "
+                                    "to by its lead (office 5 handed a robot tracked 0.01 m "
+                                    "off over to a place 9 m away by the map); one no path "
+                                    "reaches is not ruled out; 0: no limit")
     reliable_sigma_m: float = setting(0.05, gt=0.0, le=5.0, doc="an estimate is reliable "
                                       "when its xy std is below this...")
     reliable_confidence: float = setting(0.5, ge=0.0, le=1.0,
