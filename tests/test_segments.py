@@ -1,6 +1,7 @@
 """Mapping through a loss (issue 31, point 1; design §6 "Segments"): the map's connected
 parts, the unmapped-space rule, and the daemon end to end: kidnapped into unmapped space
-in mapping mode it learns a place there, a segment of its own."""
+in mapping mode it learns a place there, a segment of its own, and driven back the two
+are joined."""
 
 from __future__ import annotations
 
@@ -64,7 +65,8 @@ def test_kidnapped_into_unmapped_space_a_segment_of_its_own_is_learned(
         tmp_path: Path, office_map: OfficeMap) -> None:
     """The corridor's places a, b, c (x = 3, 4.5, 6 m) are the map; the robot stands at
     b, is carried 6.5 m on to x = 11 (unmapped): a place learned there starts a segment
-    of its own, and the poses in it say they are not in the map frame."""
+    of its own, and the poses in it say they are not in the map frame; driven back
+    towards c, the segments are joined and the pose is in the map frame again."""
     refs = office_map(tmp_path / "map.db")
     b = refs["b"]
     scenario = tmp_path / "kidnap.toml"
@@ -115,14 +117,17 @@ def test_kidnapped_into_unmapped_space_a_segment_of_its_own_is_learned(
 
             assert wait_for(lambda: len(apart()) >= 5, 60), poses[-1:]
             assert all(p["map"] is None and "not joined" in p["reason"] for p in apart())
-            # The join when the robot is driven back (segments_joined, the pose in the map
-            # frame again) came in 2 of 2 runs on an idle machine and 0 of 2 beside two
-            # busy loops (a loss right after a learn started a third segment, and global
-            # relocalisation moved the tracker into the map with no transition measured):
-            # not held to in the suite until it is reliable (the notes of this change).
             with lock:
                 learned = [e for e in events if e["event"] == "place_learned"]
             assert learned and learned[0]["place"] == new_place
+            # Driven back towards c: the segments are joined (a cycle closed, or the
+            # bridge from the last fix in the new segment through a loss that only
+            # faded), and the pose is in the map frame again.
+            assert wait_for(lambda: seen("segments_joined") is not None, 240), \
+                [e["event"] for e in events]
+            joined = seen("segments_joined")
+            assert joined is not None and new_place in joined["joined"]
+            assert wait_for(lambda: poses[-1]["map"] is not None, 60), poses[-1:]
         finally:
             session.close()
         assert proc.poll() is None
