@@ -133,11 +133,10 @@ class AcquisitionWatch:
             # robot may stand well past it (office 3 resumed 0.7 m past a place, and
             # counting the distances from there left 1.34 m to the next place, a stretch
             # where neither stood out).
-            fresh = self._fresh
-            self._watch(known, tracked.place_id, learned=False)
-            if fresh and tracked.pose is not None and odo is not None:
-                self.acquisition.reset(tracked.place_id,
-                                       reference=reference_in_odometry(odo, tracked.pose))
+            reference = None
+            if self._fresh and tracked.pose is not None and odo is not None:
+                reference = reference_in_odometry(odo, tracked.pose)
+            self._watch(known, tracked.place_id, learned=False, reference=reference)
         if self._watched is None and not self._meters:
             return WatchStep()
         prepared = prepare()
@@ -207,13 +206,15 @@ class AcquisitionWatch:
         self._watch(known, best.place_id, learned=False)
         return best
 
-    def _watch(self, known: KnownMap, place_id: int, learned: bool) -> None:
+    def _watch(self, known: KnownMap, place_id: int, learned: bool,
+               reference: Odometry | None = None) -> None:
         """Acquisition watches ``place_id`` from here: ``learned`` there (its reference
-        is where the watch begins), or a known place taken over."""
+        is where the watch begins), or a known place taken over — counted from
+        ``reference`` when given (PlaceAcquisition.reset)."""
         self._watched = (place_id, known.places[place_id].templates)
         self._watched_learned = learned
         self._fresh = False
-        self.acquisition.reset(place_id)
+        self.acquisition.reset(place_id, reference=reference)
 
     def _most_like_view(self, known: KnownMap, grey: np.ndarray, candidates: list[int]
                         ) -> list[int]:

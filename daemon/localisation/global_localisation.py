@@ -177,7 +177,6 @@ class LossDetector:
         self.least_low = math.inf  # the lowest output of the current run of low frames
         self.why = ""  # the reason of the last loss declared
         self.blind = False  # ...declared by the blind rule (no evidence, nothing contradicted)
-        self.faded = False  # ...declared by the output rule, the view never contradicting
 
     def reset(self) -> None:
         self.low_frames = 0
@@ -196,7 +195,7 @@ class LossDetector:
                 self.why = (f"no evidence over {s.blind_m:.1f} m: fewer than "
                             f"{s.evidence_landmarks} of the place's landmarks usable from "
                             "the estimate (odometry alone)")
-                self.blind, self.faded = True, False
+                self.blind = True
                 return True
             return False
         self.blind_m = 0.0
@@ -206,9 +205,14 @@ class LossDetector:
         if self.low_frames == s.loss_frames:
             self.why = f"sensor output below {s.loss_output} for {s.loss_frames} frames"
             self.blind = False
-            self.faded = faded(self.least_low, s)
             return True
         return False
+
+    @property
+    def faded(self) -> bool:
+        """The current run of low frames only faded (:func:`faded`): whichever rule
+        declares the loss on it, the output rule or another place leading the search."""
+        return faded(self.least_low, self.settings)
 
     @property
     def suspicious(self) -> bool:

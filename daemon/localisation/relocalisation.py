@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from typing import Literal, Protocol
 
 from daemon.localisation.belief import LocalisationEvent, PlaceScore
-from daemon.localisation.global_localisation import LeadWatch, LossDetector, PlaceSearch, faded
+from daemon.localisation.global_localisation import LeadWatch, LossDetector, PlaceSearch
 from daemon.localisation.settings import LocalisationSettings
 
 Mode = Literal["search", "confirm", "track", "recover"]
@@ -79,7 +79,7 @@ def contradicted(support: float | None, confidence: float,
 def left_view(by_sensor: bool, blind: bool, only_faded: bool) -> bool:
     """Whether a loss is the robot leaving the place's view on its own, its estimate right
     up to it: no evidence over blind travel (the output rule's blind clause), or a view
-    that ``only_faded`` (``global_localisation.faded``: through the run of low frames the
+    that ``only_faded`` (``LossDetector.faded``: through the run of low frames the
     output never fell below ``doubt_output``) — whichever rule declared the loss, the
     output or another place leading the search. Office 5's endurance run drove from a
     place of one segment into the view of another's, 0.02 m off, the output fading
@@ -289,8 +289,7 @@ class Relocalisation:
             if after_tracking(lost_now, led) == "track":
                 return Supervised(scored)
             self.episode = (stamp_ns, frame)
-            left = left_view(lost_now, self.loss.blind, self.loss.faded if lost_now
-                             else faded(self.loss.least_low, s))
+            left = left_view(lost_now, self.loss.blind, self.loss.faded)
             event = LocalisationEvent("lost", current, self.loss.why if lost_now else
                                       f"another place led the search by "
                                       f"{s.search_margin} for {s.led_frames} frames",
