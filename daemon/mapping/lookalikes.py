@@ -70,19 +70,15 @@ def likeliest(views: list[np.ndarray], margin: int, signatures: dict[int, np.nda
     return [i for i in ids if i in keep or signatures[i] is None]
 
 
-def lookalikes(views: list[np.ndarray], own: PreparedTemplates, own_background: float,
-               others: dict[int, MappedPlace], margin: float, limit: int,
-               spread: Spread = in_turn) -> list[int]:
-    """The places of ``others`` that the lower level tells from the new place (``own``,
-    seen in the grey ``views``) by at most ``margin`` either way, at most ``limit``, the
-    closest first. ``spread``: how the views' matching is run (in turn, or over threads;
-    the same answer)."""
+def lookalikes(lrps: np.ndarray, own_background: float, others: dict[int, MappedPlace],
+               margin: float, limit: int) -> list[int]:
+    """The places of ``others`` that the lower level tells from the new place by at most
+    ``margin`` either way, at most ``limit``, the closest first. ``lrps``: (views, 1 +
+    places) the LRP of the new place's landmarks (column 0) and of each of ``others``'
+    (in its order) in each of the new place's views (:func:`lrps_in_views`)."""
     if not others:
         return []
-    matcher = FastMatcher()
     ids = list(others)
-    templates = [own] + [others[i].templates for i in ids]
-    lrps = np.array(spread(lambda v: matcher.lrps(PreparedPanorama.of(v), templates), views))
     leads = lrps.mean(axis=0) - np.array([own_background] + [others[i].background
                                                              for i in ids])
     gap = leads[0] - leads[1:]  # how far each old place stands below the new one here
@@ -93,9 +89,44 @@ def lookalikes(views: list[np.ndarray], own: PreparedTemplates, own_background: 
     return [ids[k] for k in order[:limit] if gap[k] <= margin]
 
 
+def lrps_in_views(views: list[np.ndarray], places: list[PreparedTemplates],
+                  known: Callable[[int, int], float | None] = lambda _place, _view: None,
+                  spread: Spread = in_turn) -> np.ndarray:
+    """(views, places) each place's LRP in each grey view: ``known(place index, view
+    index)`` when it has it (measured during the drive, daemon/service/learn_ahead.py),
+    else measured here, one matrix product per view for all the missing. ``spread``: how
+    the views are run (in turn, or over threads; the same answer)."""
+    matcher = FastMatcher()
+
+    def row(k: int) -> list[float]:
+        have = {q: known(q, k) for q in range(len(places))}
+        missing = [q for q, lrp in have.items() if lrp is None]
+        measured = dict(zip(missing, matcher.lrps(PreparedPanorama.of(views[k]),
+                                                  [places[q] for q in missing]), strict=True)
+                        ) if missing else {}
+        return [measured[q] if lrp is None else lrp for q, lrp in have.items()]
+
+    return np.array(spread(row, list(range(len(views)))))
+
+
+@dataclass(frozen=True)
+class Foreseen:
+    """Features found during a learn's drive for the look-alikes it foresaw
+    (daemon/service/learn_ahead.py): each one's against the new place's views, and the
+    new place's against all of them."""
+
+    theirs: dict[int, Feature]
+    mine: Feature
+
+    @property
+    def lookalikes(self) -> set[int]:
+        return set(self.theirs)
+
+
 def pair_features(new_id: int, new_views: list[np.ndarray],
                   lookalike_views: dict[int, list[np.ndarray]], margin: int,
-                  spread: Spread = in_turn) -> list[PairFeatures]:
+                  spread: Spread = in_turn, foreseen: Foreseen | None = None
+                  ) -> list[PairFeatures]:
     """The features of the new place (views: its reference first) and each look-alike
     (id → its grey views, the reference first, then its learning views if the map kept
     them): the new place's one feature (:func:`own_feature`), and each look-alike's
@@ -103,17 +134,30 @@ def pair_features(new_id: int, new_views: list[np.ndarray],
     scored on its reference alone counts on matching as it does there (own NCC 1), and
     a robot a little off the reference sees it match far less: on aliased-corridor
     seed 101 every older place's vote fell below the newest one's, and the decisions
-    named the newest place on 3 of 32 ambiguous frames where it was 4-5 m away."""
+    named the newest place on 3 of 32 ambiguous frames where it was 4-5 m away.
+
+    ``foreseen``: features found for the same views already, taken as they are (a
+    feature is a function of the two places' views alone; the new place's, of the set of
+    look-alikes' views, whatever their order)."""
     if not lookalike_views:
         return []
+    known = foreseen.theirs if foreseen is not None else {}
+    mine_known = foreseen.mine if foreseen is not None and \
+        foreseen.lookalikes == set(lookalike_views) else None
     against_new = prepared(new_views)  # once for every look-alike's search
-    searches: list[Callable[[], Feature]] = [
-        lambda: own_feature(new_views, list(lookalike_views.values()), margin),
-        *[functools.partial(find_feature, views, against_new, margin)
-          for views in lookalike_views.values()]]
-    mine, *theirs = spread(lambda search: search(), searches)
-    return [PairFeatures(new_id, other_id, mine, feature)
-            for other_id, feature in zip(lookalike_views, theirs, strict=True)]
+    searches: dict[int | None, Callable[[], Feature]] = {}
+    if mine_known is None:
+        searches[None] = lambda: own_feature(new_views, list(lookalike_views.values()),
+                                             margin)
+    for other_id, views in lookalike_views.items():
+        if other_id not in known:
+            searches[other_id] = functools.partial(find_feature, views, against_new, margin)
+    found = dict(zip(searches, spread(lambda search: search(), list(searches.values())),
+                     strict=True))
+    mine = mine_known if mine_known is not None else found[None]
+    return [PairFeatures(new_id, other_id, mine,
+                         known[other_id] if other_id in known else found[other_id])
+            for other_id in lookalike_views]
 
 
 def own_feature(new_views: list[np.ndarray], lookalike_views: list[list[np.ndarray]],

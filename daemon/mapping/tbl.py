@@ -250,6 +250,19 @@ class TurnBackAndLook:
                                      score=float(recognition_margin[i])))
         return LandmarkSet(tuple(landmarks), self.width, self.margin)
 
+    @property
+    def views_expected(self) -> int:
+        """The views the cross takes: one half-way out along each arm."""
+        return sum(leg.out for leg in self.legs)
+
+    def kept_so_far(self) -> list[int]:
+        """The candidates (indices, in selection order) :meth:`result` would keep were the
+        cross to end now: what a learn's matching during the drive foresees
+        (daemon/service/learn_ahead.py)."""
+        frames = max(self.recognition_margin_frames, 1)
+        return sorted(keep_in_light(self.recognition_margin_sum / frames, self.light_ncc,
+                                    self.settings.keep, self.settings.light_ncc))
+
     def result(self) -> LandmarkSet:
         """The place's landmark set: the ``keep`` candidates that stood out best over the
         cross (§4.3, scored as in the module docstring) with their depths, in bearing

@@ -232,7 +232,7 @@ class LearnJob:
             tbl = drive_tbl(sensors, self.mover, self.unwarper,
                             self.settings, progress=self._on_progress,
                             abort=self.abort_requested, on_start=self._begin,
-                            mount=self.mount)
+                            mount=self.mount, ahead=self.session.learn_ahead())
             if self.abort_requested.is_set():
                 raise LearningAbortedError("learning aborted on request")
             if self.started_by == "autopilot":

@@ -16,9 +16,12 @@ import time
 from collections.abc import Callable
 from typing import Any, Protocol
 
+import numpy as np
+
 from daemon.localisation.odometry import OdometryBuffer
 from daemon.mapping.settings import TblSettings
 from daemon.mapping.tbl import CandidateChooser, Progress, TurnBackAndLook
+from daemon.vision.landmarks import LandmarkSet
 from daemon.vision.unwarp import Unwarper
 from hal.base.base import BaseInfo, BaseStatus
 from hal.base.settings import BaseSettings
@@ -42,6 +45,16 @@ class Sensors(Protocol):
 
     def frame(self) -> tuple[Frame, Odometry]:
         """The next frame and the odometry at its stamp; LearningError when either stops."""
+
+
+class Ahead(Protocol):
+    """What a learn measures while its cross is driven (daemon/service/learn_ahead.py)."""
+
+    def begin(self, candidates: LandmarkSet, reference: np.ndarray) -> None: ...
+
+    def view(self, grey: np.ndarray) -> None: ...
+
+    def foresee(self, kept: list[int]) -> None: ...
 
 
 class Mover(Protocol):
@@ -145,12 +158,15 @@ def drive_tbl(sensors: Sensors, mover: Mover, unwarper: Unwarper, settings: TblS
               abort: threading.Event | None = None,
               choose: CandidateChooser | None = None,
               on_start: Callable[[Odometry], None] | None = None,
-              mount: Mount | None = None) -> TurnBackAndLook:
+              mount: Mount | None = None, ahead: Ahead | None = None) -> TurnBackAndLook:
     """Drive the whole cross; returns the finished state machine (its result, its
     reference panorama and odometry, and for evaluation every scored candidate).
     ``choose``: see TurnBackAndLook. ``on_start`` is told the odometry at the reference
     pose before the robot moves. ``mount``: where the camera sits on the robot; the
     odometry ``sensors`` give is the camera's (kernel/mount.py), the moves are the robot's.
+    ``ahead`` is handed the candidates and the reference panorama as the cross starts,
+    each view it takes (``TurnBackAndLook.views``) as it is taken, and with the last the
+    candidates the cross would keep were it to end there.
 
     Refuses (LearningError) when the base cannot move or frames stop arriving; on
     ``abort`` the robot is stopped and LearningAbortedError raised (nothing is stored)."""
@@ -166,6 +182,8 @@ def drive_tbl(sensors: Sensors, mover: Mover, unwarper: Unwarper, settings: TblS
                           mount=(mount or Mount()).robot_camera)
     if on_start is not None:
         on_start(odo)
+    if ahead is not None:
+        ahead.begin(tbl.candidates, tbl.reference_panorama)
     frames_this_leg = 0
     max_frames_per_leg = max(1, int(settings.move_timeout_s * sensors.rate_hz))
     try:
@@ -180,7 +198,12 @@ def drive_tbl(sensors: Sensors, mover: Mover, unwarper: Unwarper, settings: TblS
             status = mover.status()
             # A move only counts as done once the base has seen it: not on the first frame.
             done = status.move_done and not status.moving and frames_this_leg > 0
+            views = len(tbl.views)
             step = tbl.on_frame(unwarper.unwarp(frame.image), odo, done)
+            if ahead is not None and len(tbl.views) > views:
+                ahead.view(tbl.views[-1])
+                if len(tbl.views) == tbl.views_expected:
+                    ahead.foresee(tbl.kept_so_far())
             frames_this_leg += 1
             if frames_this_leg > max_frames_per_leg:
                 raise LearningError(f"the base did not finish a move within "

@@ -25,10 +25,12 @@ from daemon.mapping.backgrounds import views_of
 from daemon.mapping.embedding import embed
 from daemon.mapping.graph import TopologicalMap
 from daemon.mapping.lookalikes import (
+    Foreseen,
     MappedPlace,
     in_turn,
     likeliest,
     lookalikes,
+    lrps_in_views,
     pair_features,
 )
 from daemon.mapping.odometry_chain import OdometryChain, held_verdict
@@ -48,7 +50,7 @@ T = TypeVar("T")
 R = TypeVar("R")
 
 
-def _background(place: Place, default: float) -> float:
+def background_of(place: Place, default: float) -> float:
     """The place's background LRP: measured, else the estimate made when it was
     learned, else ``default`` (design §9)."""
     for value in (place.background_lrp, place.background_estimate):
@@ -381,6 +383,17 @@ class Mapper:
                 self._lrps.popitem(last=False)
         return [known[q] for q in place_ids]
 
+    def remember_lrps(self, lrps: dict[tuple[int, int], float]) -> None:
+        """LRPs measured elsewhere (a learn's, during its drive: daemon/service/
+        learn_ahead.py), (landmarks' place, view's place) → LRP, as lrps_in_view keeps
+        its own."""
+        with self._lock:
+            for key, lrp in lrps.items():
+                self._lrps[key] = lrp
+                self._lrps.move_to_end(key)
+            while len(self._lrps) > LRPS_KEPT:
+                self._lrps.popitem(last=False)
+
     def _keep_cross_backgrounds(self, values: dict[int, float]) -> list[Place]:
         with self._lock:
             self.store.set_cross_backgrounds(values)
@@ -392,12 +405,16 @@ class Mapper:
         return changed
 
     def learn_features(self, place_id: int, views: list[np.ndarray],
-                       settings: LocalisationSettings) -> list[PairFeatures]:
+                       settings: LocalisationSettings,
+                       in_own_views: dict[tuple[int, int], float] | None = None,
+                       foreseen: Foreseen | None = None) -> list[PairFeatures]:
         """The disambiguating features of a place just learned and each of its look-alikes
         (design §5), stored and in the map; ``views``: grey panoramas taken half-way out
         along the arms of its Turn Back and Look cross, stored with the place so that a
-        later look-alike's features are scored over them too. A read-only map gets
-        none."""
+        later look-alike's features are scored over them too; ``in_own_views``: LRPs in
+        those views measured during the drive, (place, view: 0 the reference, then
+        ``views``) → LRP, and ``foreseen``: the features found for the look-alikes the drive
+        foresaw (daemon/service/learn_ahead.py). A read-only map gets none."""
         if self.store.readonly or settings.max_lookalikes == 0:
             return []
         with self._lock:
@@ -406,28 +423,19 @@ class Mapper:
             # carried between them; look-alikes that matter stand farther off.
             near = {p for p, T in self.graph.reached(place_id).items()
                     if math.hypot(T.x, T.y) < settings.lookalike_min_distance_m}
-            signatures = {p.id: p.signature for p in self.graph.places
-                          if p.id != place_id and p.id not in near}
-        margin = place.landmarks.margin
         own_views = [self.grey_reference(place_id), *views]
-        with self._lock:
-            candidates = [self.graph.place(pid) for pid in likeliest(
-                own_views, margin, signatures, settings.lookalike_candidates)
-                if pid in self.graph]
-        prepared = {p.id: self.templates(p.id)
-                    for p in [place, *candidates]}  # each once, for the LRPs and the test
-        at_home = self.spread(lambda p: self.lrps_in_view(p.id, [p.id, place_id], prepared),
-                              candidates)
-        others = {p.id: MappedPlace(prepared[p.id], _background(p, settings.background_lrp),
-                                    *lrps) for p, lrps in zip(candidates, at_home, strict=True)}
-        found = lookalikes(own_views, prepared[place_id],
-                           _background(place, settings.background_lrp), others,
-                           settings.lookalike_margin,
-                           settings.max_lookalikes, self.spread)
+        margin = place.landmarks.margin
+        prepared = self.templates(place_id)
+        known = in_own_views or {}
+        found = self.find_lookalikes(
+            place_id, own_views, margin, prepared,
+            background_of(place, settings.background_lrp), near | {place_id}, settings,
+            at_home=lambda p: self.lrps_in_view(p, [p, place_id], {place_id: prepared}),
+            known=lambda q, k: known.get((q, k)))
         self.store.put_views(place_id, views)
         pairs = pair_features(place_id, own_views,
                               {o: [self.grey_reference(o), *self.store.views(o)] for o in found},
-                              margin, self.spread)
+                              margin, self.spread, foreseen)
         for pair in pairs:
             with self._lock:
                 self.store.put_features(pair)
@@ -436,6 +444,34 @@ class Mapper:
                      "%d px at %d", place_id, pair.b_id, pair.a.size, pair.a.col, pair.b.size,
                      pair.b.col)
         return pairs
+
+    def find_lookalikes(self, new_id: int, views: list[np.ndarray], margin: int,
+                        own: PreparedTemplates, own_background: float, excluded: set[int],
+                        settings: LocalisationSettings, *,
+                        at_home: Callable[[int], list[float]],
+                        known: Callable[[int, int], float | None]) -> list[int]:
+        """The look-alike test of a new place (design §5; daemon/mapping/lookalikes.py)
+        among the ``lookalike_candidates`` places of the map likeliest by signature, but
+        ``excluded`` (itself, the places the map puts near it). ``new_id``: its id (-1
+        while it is not stored: a learn foreseeing its look-alikes during the drive);
+        ``views``: its grey views (wrap ``margin``), the reference first; ``own``: its
+        templates; ``at_home(p)``: place p's LRP in its own reference view and the new
+        place's there; ``known(p, k)``: p's LRP in view k, when measured already."""
+        with self._lock:
+            signatures = {p.id: p.signature for p in self.graph.places
+                          if p.id not in excluded}
+            candidates = [self.graph.place(pid) for pid in likeliest(
+                views, margin, signatures, settings.lookalike_candidates)
+                if pid in self.graph]
+        at = self.spread(lambda p: at_home(p.id), candidates)
+        prepared = {p.id: self.templates(p.id) for p in candidates} | {new_id: own}
+        others = {p.id: MappedPlace(prepared[p.id], background_of(p, settings.background_lrp),
+                                    *lrps) for p, lrps in zip(candidates, at, strict=True)}
+        ids = [new_id, *others]
+        lrps = lrps_in_views(views, [prepared[q] for q in ids],
+                             lambda q, k: known(ids[q], k), self.spread)
+        return lookalikes(lrps, own_background, others, settings.lookalike_margin,
+                          settings.max_lookalikes)
 
     def spread(self, work: Callable[[T], R], items: Sequence[T]) -> list[R]:
         """``work`` on each item, over the learn's matching threads (``threads``; the

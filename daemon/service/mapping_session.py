@@ -31,6 +31,7 @@ from daemon.mapping.place import Place
 from daemon.mapping.settings import AcquisitionSettings
 from daemon.mapping.transition import Transition
 from daemon.mapping.unmapped import UnmappedWatch
+from daemon.service.learn_ahead import LearnAhead
 from daemon.service.mapper import Link, Mapper, Seen
 from daemon.service.pipeline import holder_of
 from daemon.vision.recognition import PreparedTemplates
@@ -103,6 +104,7 @@ class MappingSession:
         mapper.prepared_elsewhere = self._prepared
         self.unmapped = UnmappedWatch(acquisition)
         self._taken_before: set[int] = set()  # places taken from the fleet at begin_place
+        self._ahead: LearnAhead | None = None  # the place in work's matching, as it drives
 
     def _prepared(self, place_id: int) -> PreparedTemplates | None:
         known = self.holder.current.places.get(place_id)
@@ -258,12 +260,24 @@ class MappingSession:
         self.unmapped.reset()
 
     # ------------------------------------------------------------ learning
+    def learn_ahead(self) -> LearnAhead:
+        """The matching of the place about to be learned, done while its cross is driven
+        (daemon/service/learn_ahead.py; hand it to ``drive_tbl``); store_place reads it,
+        cancel_place stops it."""
+        if self._ahead is not None:
+            self._ahead.cancel()
+        self._ahead = LearnAhead(self.mapper, self.localisation)
+        return self._ahead
+
     def begin_place(self, reference: Odometry, seen: Seen | None) -> list[Link]:
         """A place is being learned at the pose where odometry read ``reference``
         (Mapper.begin_place)."""
         with self.mapper.lock:
             self._taken_before = set(self.mapper.origins)
-        return self.mapper.begin_place(reference, seen)
+        links = self.mapper.begin_place(reference, seen)
+        if self._ahead is not None:
+            self._ahead.joined(links)
+        return links
 
     def taken_meanwhile(self, score: Callable[[list[int]], list[PlaceScore]]
                         ) -> tuple[int, str] | None:
@@ -285,6 +299,9 @@ class MappingSession:
         return None if taken is None else (taken, robots[taken])
 
     def cancel_place(self) -> None:
+        if self._ahead is not None:
+            self._ahead.cancel()
+            self._ahead = None
         self.mapper.cancel_place()
 
     def store_place(self, place: Place, links: list[Link], views: list[np.ndarray],
@@ -297,15 +314,27 @@ class MappingSession:
         localiser's reliable estimate once the cross is driven (Mapper.late_link)."""
         if not self.mapping:
             raise PlacecellError("the map is read-only in localisation mode")
+        ahead, self._ahead = self._ahead, None
         with self._lock:
             before = dict(self.mapper.segment_of)
-            stored, transitions = self.mapper.add_place(place, links, seen_at_end)
-            on_stored(stored)
+            try:
+                stored, transitions = self.mapper.add_place(place, links, seen_at_end)
+                on_stored(stored)
+            except Exception:
+                if ahead is not None:
+                    ahead.cancel()
+                raise
             changed: list[Place] = []
             pairs = []
             try:
+                measured = None if ahead is None else ahead.finish()
+                in_views, in_own_views = ({}, {}) if measured is None else \
+                    measured.lrps(stored)
+                self.mapper.remember_lrps(in_views)
                 changed = self.mapper.measure_cross_backgrounds(stored.id)
-                pairs = self.mapper.learn_features(stored.id, views, self.localisation)
+                pairs = self.mapper.learn_features(
+                    stored.id, views, self.localisation, in_own_views,
+                    None if measured is None else measured.foreseen)
             except Exception:  # noqa: BLE001 - the place is stored; cues can be redone
                 log.exception("place %d: its backgrounds or look-alikes' features were not "
                               "found", stored.id)

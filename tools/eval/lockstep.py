@@ -230,7 +230,8 @@ class Run:
         self.localiser.learning(True)  # as the daemon does while a learn job runs
         try:
             tbl = drive_tbl(self.sensors, self.base, self.localiser.unwarper, self.cfg.tbl,
-                            on_start=start, mount=self.cfg.mount)
+                            on_start=start, mount=self.cfg.mount,
+                            ahead=self.session.learn_ahead())
         except LearningError:  # as the daemon's job ends: nothing stored
             self.session.cancel_place()
             self.localiser.learning_not_started()

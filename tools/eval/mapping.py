@@ -222,7 +222,7 @@ def _first_pass(cfg: PlacecellConfig, scenario: Scenario, map_path: Path,
             try:
                 tbl = drive_tbl(sensors, base, localiser.unwarper, cfg.tbl,
                                 on_start=functools.partial(_begin, session, links, localiser),
-                                mount=cfg.mount)
+                                mount=cfg.mount, ahead=session.learn_ahead())
             except LearningError:
                 session.cancel_place()
                 localiser.learning_not_started()
