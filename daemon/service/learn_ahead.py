@@ -110,8 +110,9 @@ def lrp_of(best: np.ndarray, kept: np.ndarray) -> float:
 
 class LearnAhead:
     """The matching of one learn, fed by its drive (daemon/service/learning.py:
-    ``drive_tbl`` calls ``begin`` once the candidates are chosen and ``view`` with each
-    view the cross takes), read by the mapper once the place is stored (``finish``)."""
+    ``drive_tbl`` calls ``begin`` once the candidates are chosen, ``view`` with each view
+    the cross takes and ``foresee`` with the last; MappingSession.begin_place tells it the
+    place's transitions, ``joined``), read once the place is stored (``finish``)."""
 
     def __init__(self, mapper: Mapper, settings: LocalisationSettings) -> None:
         self._mapper = mapper
@@ -127,7 +128,7 @@ class LearnAhead:
         self._views: list[PreparedPanorama] = []  # the same, prepared once
         self._elsewhere: np.ndarray | None = None  # each candidate's best NCC elsewhere
         self._links: list[tuple[int, SE2]] = []  # (place, T_place_new) it will be stored with
-        self._likely: list[int] = []  # every view's likeliest look-alikes so far
+        self._likely: list[int] = []  # every place listed as a likely look-alike so far
         self._margin = 0
 
     # ------------------------------------------------------------ from the drive

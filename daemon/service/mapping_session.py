@@ -312,9 +312,11 @@ class MappingSession:
         to the localiser. ``on_stored``: called once the place itself is in the map file
         (a failure after that loses only cues that can be redone); ``seen_at_end``: the
         localiser's reliable estimate once the cross is driven (Mapper.late_link)."""
-        if not self.mapping:
-            raise PlacecellError("the map is read-only in localisation mode")
         ahead, self._ahead = self._ahead, None
+        if not self.mapping:
+            if ahead is not None:
+                ahead.cancel()
+            raise PlacecellError("the map is read-only in localisation mode")
         with self._lock:
             before = dict(self.mapper.segment_of)
             try:
