@@ -53,8 +53,8 @@ from kernel.se2 import SE2
 log = logging.getLogger(__name__)
 
 NOT_STORED = -1  # the new place's id while it is not in the map
-# Places beyond each view's ``lookalike_candidates`` likeliest taken ahead: the final
-# list leaves out the places the map puts near the new one, and takes the next instead.
+# Places beyond the ``lookalike_candidates`` likeliest taken ahead: the final list
+# leaves out the places the map puts near the new one, and takes the next instead.
 SPARE_CANDIDATES = 8
 
 
@@ -197,14 +197,20 @@ class LearnAhead:
             places = self._mapper.graph.places
             return [p.id for p in places], {p.id: p.signature for p in places}
 
-    def _in_place_view(self, place_id: int) -> None:
-        """Every candidate's best NCC in a place's reference view."""
+    def _in_place_view(self, place_id: int, at_home: bool = False) -> None:
+        """Every candidate's best NCC in a place's reference view; ``at_home``: the place's
+        own LRP there too (kept by the mapper), from the one preparation of the view."""
         measured = self._measured
         assert measured is not None and self._candidates is not None
-        if place_id not in measured.in_place_views and not self._cancelled.is_set():
+        if self._cancelled.is_set():
+            return
+        pano = None
+        if place_id not in measured.in_place_views:
             pano = PreparedPanorama.of(self._mapper.grey_reference(place_id))
             measured.in_place_views[place_id] = self._matcher.best_ncc(pano,
                                                                        self._candidates)
+        if at_home:
+            self._mapper.lrps_in_view(place_id, [place_id], view_prepared=pano)
 
     def _cross_views(self) -> None:
         """The views the new place's cross background will average (its id comes after
@@ -214,9 +220,9 @@ class LearnAhead:
             self._in_place_view(place_id)
 
     def _own_view(self, grey: np.ndarray) -> None:
-        """One own view: every candidate's best NCC in it, the view's likeliest look-alikes
-        (design §5) and every likely place's LRP in it, the new likely places' in the
-        views before; the new likely places' own LRP at home, and the candidates' there."""
+        """One own view: every candidate's best NCC in it, the likeliest look-alikes over
+        the views so far (design §5) and every likely place's LRP in it, the newly likely
+        places' in the views before; their own LRP at home, and the candidates' there."""
         measured = self._measured
         assert measured is not None
         if self._candidates is None:
@@ -242,8 +248,7 @@ class LearnAhead:
             for p, lrp in zip(places, self._matcher.lrps(view, templates), strict=True):
                 measured.places_in_own_views[(p, j)] = lrp
         for p in new:
-            self._in_place_view(p)
-            self._mapper.lrps_in_view(p, [p])  # its own LRP at home, kept by the mapper
+            self._in_place_view(p, at_home=True)
 
     def _near(self) -> set[int]:
         """The places the map will put within ``lookalike_min_distance_m`` of the new one,
@@ -276,7 +281,7 @@ class LearnAhead:
         own = PreparedTemplates.of(measured.candidates.templates()[kept])
 
         def at_home(p: int) -> list[float]:
-            self._in_place_view(p)
+            self._in_place_view(p, at_home=True)
             return [*self._mapper.lrps_in_view(p, [p]),
                     lrp_of(measured.in_place_views[p], kept)]
 

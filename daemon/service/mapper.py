@@ -360,33 +360,30 @@ class Mapper:
             {q: sums[q] / len(views[q]) for q in place_ids if views[q]})
 
     def lrps_in_view(self, view: int, place_ids: list[int],
-                     prepared: dict[int, PreparedTemplates] | None = None) -> list[float]:
+                     prepared: dict[int, PreparedTemplates] | None = None,
+                     view_prepared: PreparedPanorama | None = None) -> list[float]:
         """The LRP of each place's landmarks in place ``view``'s reference panorama, each
         measured once while among the LRPS_KEPT used last (neither ever changes): a learn
         asks for its own landmarks in its cross background's views and again in its
         look-alike candidates' (the same places until the map passes CROSS_VIEWS), and
         for each candidate's in its own view at every learn it is a candidate in.
-        ``prepared``: the places' templates, if the caller has them prepared."""
+        ``prepared``: the places' templates, ``view_prepared``: the view's panorama, if
+        the caller has them prepared."""
         with self._lock:
             known = {q: self._lrps[(q, view)] for q in place_ids if (q, view) in self._lrps}
             missing = [q for q in place_ids if q not in known]
             given = prepared or {}
             templates = [given[q] if q in given else self.templates(q) for q in missing]
         if missing:
-            pano = PreparedPanorama.of(self.grey_reference(view))
+            pano = view_prepared or PreparedPanorama.of(self.grey_reference(view))
             known.update(zip(missing, FastMatcher().lrps(pano, templates), strict=True))
-        with self._lock:
-            for q in place_ids:
-                self._lrps[(q, view)] = known[q]
-                self._lrps.move_to_end((q, view))
-            while len(self._lrps) > LRPS_KEPT:
-                self._lrps.popitem(last=False)
+        self.remember_lrps({(q, view): known[q] for q in place_ids})
         return [known[q] for q in place_ids]
 
     def remember_lrps(self, lrps: dict[tuple[int, int], float]) -> None:
-        """LRPs measured elsewhere (a learn's, during its drive: daemon/service/
-        learn_ahead.py), (landmarks' place, view's place) → LRP, as lrps_in_view keeps
-        its own."""
+        """LRPs kept among the LRPS_KEPT used last, (landmarks' place, view's place) →
+        LRP: lrps_in_view's own, and a learn's measured during its drive
+        (daemon/service/learn_ahead.py)."""
         with self._lock:
             for key, lrp in lrps.items():
                 self._lrps[key] = lrp
