@@ -7,11 +7,12 @@ from kernel.threads import one_blas_thread
 
 one_blas_thread()
 
-# Two malloc arenas, before any thread starts: each learn left tens of MB in arenas of
-# its own (daemon/service/memory.py, docs/design.md §13).
-from daemon.service.memory import limit_arenas  # noqa: E402 - before numpy's threads
+# Two malloc arenas and fixed thresholds, before any thread starts: each learn left tens
+# of MB in arenas of its own and in a heap grown for its temporaries
+# (daemon/service/memory.py, docs/design.md §13).
+from daemon.service.memory import tune_heap  # noqa: E402 - before numpy's threads
 
-limit_arenas()
+tune_heap()
 
 import argparse  # noqa: E402 - after the thread settings above
 import logging  # noqa: E402
