@@ -8,7 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from daemon.vision.depth_ekf import BearingOnlyEKF, observation_variance
+from daemon.vision.depth_ekf import (
+    BearingOnlyEKF,
+    camera_increment_jacobian,
+    observation_variance,
+)
 from daemon.vision.landmarks import TEMPLATE, centre_bearing
 from daemon.vision.ncc import PreparedImage, ncc, ncc_map, ncc_under_light, subpixel_peak
 from daemon.vision.recognition import (
@@ -21,6 +25,7 @@ from daemon.vision.recognition import (
 from daemon.vision.selection import select_static, valley_measure
 from daemon.vision.tracking import predict_column, track
 from kernel.panorama import add_wrap_margin
+from kernel.se2 import SE2, compose_many
 
 
 def _textured(shape: tuple[int, int], seed: int, smooth: int = 3) -> np.ndarray:
@@ -182,6 +187,54 @@ def test_zoomed_observations_count_for_less() -> None:
     assert var[1] > 1.5 * var[0]
     # The update's gain shrinks as R grows by (0.7 * 0.3)²: the state moves less.
     assert abs(zoomed.x[3] - 0.4) < abs(unzoomed.x[3] - 0.4)
+
+
+def test_camera_increment_jacobian_matches_finite_differences() -> None:
+    mount = (0.15, 0.03, 0.4)
+    m = SE2(*mount)
+
+    def camera(robot: np.ndarray) -> np.ndarray:
+        return np.array(m.inverse().compose(SE2(*robot)).compose(m).as_tuple())
+
+    for robot in (np.array([0.02, -0.01, 0.3]), np.array([0.0, 0.0, -1.2])):
+        numeric = np.zeros((3, 3))
+        for k in range(3):
+            step = np.zeros(3)
+            step[k] = 1e-6
+            numeric[:, k] = (camera(robot + step) - camera(robot - step)) / 2e-6
+        assert np.allclose(camera_increment_jacobian(float(robot[2]), mount), numeric,
+                           atol=1e-8)
+
+
+def test_a_mounted_cameras_turn_carries_the_wheels_noise_through_the_lever_arm() -> None:
+    """A turn in place with the camera 0.15 m ahead: the camera's pose covariance the EKF
+    predicts is the one the robot's noisy turn gives the camera (sampled), with its
+    position tied to its heading; the robot-frame noise taken at the camera (no mount
+    given) puts the spread along the arc's chord instead of across the lever arm."""
+    mount = (0.15, 0.0, 0.0)
+    m = SE2(*mount)
+    steps, turn = 30, math.pi / 2
+    camera_step = m.inverse().compose(SE2(0.0, 0.0, turn / steps)).compose(m).as_tuple()
+    mounted, naive = (BearingOnlyEKF(np.array([1.0])) for _ in range(2))
+    for _ in range(steps):
+        mounted.predict(*camera_step, mount=mount)
+        naive.predict(*camera_step)
+    rng = np.random.default_rng(5)
+    n = 20000
+    robot = (np.zeros(n), np.zeros(n), np.zeros(n))
+    for _ in range(steps):  # the robot's noisy increments, as the EKF's noise model says
+        dtheta = turn / steps + rng.normal(0.0, mounted.rotation_noise * turn / steps, n)
+        robot = compose_many(robot, (np.full(n, 0.0), np.full(n, 0.0), dtheta))
+    cameras = compose_many(compose_many(m.inverse().as_tuple(), robot), mount)
+    sampled = np.cov(np.stack(cameras))
+    predicted = mounted.P[:3, :3]
+    assert np.allclose(np.diag(predicted), np.diag(sampled), rtol=0.15, atol=1e-8)
+    correlation = predicted[0, 2] / math.sqrt(predicted[0, 0] * predicted[2, 2])
+    sampled_correlation = sampled[0, 2] / math.sqrt(sampled[0, 0] * sampled[2, 2])
+    assert correlation == pytest.approx(sampled_correlation, abs=0.1)
+    assert abs(correlation) > 0.9
+    assert naive.P[0, 0] < 0.3 * sampled[0, 0]  # across the lever arm (it points +y)
+    assert naive.P[1, 1] > 100 * sampled[1, 1]  # along it
 
 
 def test_far_landmarks_stay_uncertain() -> None:

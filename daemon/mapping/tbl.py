@@ -233,7 +233,7 @@ class TurnBackAndLook:
         c, s = math.cos(a.yaw), math.sin(a.yaw)
         gx, gy = b.x - a.x, b.y - a.y
         dyaw = math.remainder(b.yaw - a.yaw, 2 * math.pi)
-        self.ekf.predict(c * gx + s * gy, -s * gx + c * gy, dyaw)
+        self.ekf.predict(c * gx + s * gy, -s * gx + c * gy, dyaw, self.mount.as_tuple())
         self._last_odometry = b
 
     def scored(self) -> LandmarkSet:

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kernel.angles import wrap_angle
+from kernel.se2 import SE2
 
 
 @dataclass(frozen=True)
@@ -71,8 +72,16 @@ class BearingOnlyEKF:
     def pose(self) -> tuple[float, float, float]:
         return float(self.x[0]), float(self.x[1]), float(self.x[2])
 
-    def predict(self, dx: float, dy: float, dtheta: float) -> None:
-        """Odometry increment in the robot frame; noise proportional to the motion."""
+    def predict(self, dx: float, dy: float, dtheta: float,
+                mount: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+        """Odometry increment in the robot frame; noise proportional to the motion.
+
+        ``mount``: T_robot_camera (kernel/mount.py). The pose and the increment are then
+        the camera's, but the noise arises in the robot's wheels: it is taken at the
+        robot's increment Δr = M Δc M⁻¹ and carried to the camera's through the lever
+        arm (:func:`camera_increment_jacobian`), so a turn in place swings the camera's
+        position with the turn's heading error instead of adding translation noise of
+        its own (as the localiser's motion model, daemon/localisation/motion_model.py)."""
         x, y, th = self.x[:3]
         c, s = math.cos(th), math.sin(th)
         self.x[0] = x + c * dx - s * dy
@@ -81,18 +90,29 @@ class BearingOnlyEKF:
         F = np.eye(3)
         F[0, 2] = -s * dx - c * dy
         F[1, 2] = c * dx - s * dy
-        dist = math.hypot(dx, dy)
-        # Process noise in the robot frame: translation under translation, rotation under
-        # rotation (thesis: 0.01 and 0.10), a little rotation under translation.
-        q_t = (self.translation_noise * dist) ** 2 + 1e-10
-        q_r = (self.rotation_noise * abs(dtheta)) ** 2 + (self.heading_noise_per_m * dist
-                                                          ) ** 2 + 1e-10
+        if mount == (0.0, 0.0, 0.0):
+            Q_increment = self._increment_noise(dx, dy, dtheta)
+        else:
+            m = SE2(*mount)
+            robot = m.compose(SE2(dx, dy, dtheta)).compose(m.inverse()).as_tuple()
+            J = camera_increment_jacobian(robot[2], mount)
+            Q_increment = J @ self._increment_noise(*robot) @ J.T
         G = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        Q = G @ np.diag([q_t, q_t, q_r]) @ G.T
+        Q = G @ Q_increment @ G.T
         P = self.P
         P[:3, :] = F @ P[:3, :]
         P[:, :3] = P[:, :3] @ F.T
         P[:3, :3] += Q
+
+    def _increment_noise(self, dx: float, dy: float, dtheta: float) -> np.ndarray:
+        """Covariance of an increment (dx, dy, dθ) in the frame it starts in: translation
+        under translation, rotation under rotation (thesis: 0.01 and 0.10), a little
+        rotation under translation."""
+        dist = math.hypot(dx, dy)
+        q_t = (self.translation_noise * dist) ** 2 + 1e-10
+        q_r = (self.rotation_noise * abs(dtheta)) ** 2 + (self.heading_noise_per_m * dist
+                                                          ) ** 2 + 1e-10
+        return np.diag([q_t, q_t, q_r])
 
     def update(self, i: int, bearing: float, ncc: float, log_zoom: float = 0.0) -> None:
         """Observation of landmark ``i`` at ``bearing`` (rad) with match score ``ncc``,
@@ -133,3 +153,21 @@ class BearingOnlyEKF:
                                  rho, float(P[0, 0]))
         J = np.array([[-1.0 / rho**2, 0.0], [0.0, 1.0]])  # d(d, γ)/d(ρ, γ)
         return DepthEstimate(1.0 / rho, gamma, J @ P @ J.T, rho, float(P[0, 0]))
+
+
+def camera_increment_jacobian(robot_turn: float, mount: tuple[float, float, float]
+                              ) -> np.ndarray:
+    """∂Δc/∂Δr of the camera's increment Δc = M⁻¹ Δr M in the robot's Δr = (t_r, θ_r),
+    for the mount M = (m, φ): Δc = (R(−φ) (t_r + R(θ_r) m − m), θ_r), so
+
+        ∂t_c/∂t_r = R(−φ),   ∂t_c/∂θ_r = R(−φ) R(θ_r) m⊥   (m⊥ = (−m_y, m_x)),   ∂θ_c/∂θ_r = 1.
+    """
+    mx, my, phi = mount
+    c, s = math.cos(-phi), math.sin(-phi)
+    R_back = np.array([[c, -s], [s, c]])
+    ct, st = math.cos(robot_turn), math.sin(robot_turn)
+    swing = R_back @ np.array([ct * -my - st * mx, st * -my + ct * mx])
+    J = np.eye(3)
+    J[:2, :2] = R_back
+    J[:2, 2] = swing
+    return J
