@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from daemon.localisation.belief import Belief
+from daemon.mapping.tbl import cross_legs
 from kernel.mount import Mount
 from kernel.se2 import SE2
 from kernel.types import Odometry
@@ -66,6 +67,30 @@ def test_a_belief_about_the_camera_is_given_out_as_the_robots() -> None:
     assert (robot.odometry.x, robot.odometry.y) == pytest.approx((0.0, 0.0))
     assert robot.covariance is not None and robot.covariance[0] > 1e-4  # the lever arm
     assert belief.of_robot(Mount()) is belief
+
+
+@pytest.mark.parametrize("camera", [(0.0, 0.0), (0.15, 0.0), (0.1, -0.04)])
+def test_a_differential_base_takes_its_camera_to_the_five_points_of_the_cross(
+        camera: tuple[float, float]) -> None:
+    """The cross is the camera's (thesis §4.3): each out leg ends with the camera at
+    ±0.5 m along the reference's x or y, and the robot ends where it started. Turning in
+    place without aligning first would put a camera 0.15 m ahead 0.15 m behind the
+    reference's x on the side arms, the arms' tips at +0.65 and −0.35 m."""
+    mount = SE2(camera[0], camera[1], 0.2)
+    robot = SE2(1.0, -2.0, 0.7)
+    camera_at_reference = robot.compose(mount)
+    # The cross's axes are the robot's at the reference, its centre the camera's position.
+    reference = SE2(camera_at_reference.x, camera_at_reference.y, robot.yaw)
+    tips = []
+    for leg in cross_legs(0.5, "differential", camera):
+        robot = robot.compose(SE2(leg.dx, leg.dy, leg.dyaw))
+        if leg.out:
+            at = reference.between(robot.compose(mount))
+            tips.append((round(at.x, 9) + 0.0, round(at.y, 9) + 0.0))
+    assert tips == [(0.5, 0.0), (-0.5, 0.0), (0.0, 0.5), (0.0, -0.5)]
+    assert camera_at_reference.between(robot.compose(mount)).as_tuple() == pytest.approx(
+        (0.0, 0.0, 0.0))
+    assert all(leg.dy == 0.0 for leg in cross_legs(0.5, "differential", camera))
 
 
 def _tbl_local(*flags: str, capsys: pytest.CaptureFixture[str]) -> float:

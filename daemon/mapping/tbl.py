@@ -74,23 +74,36 @@ class Leg:
 
     @property
     def out(self) -> bool:
-        return not self.name.startswith(("back", "turn"))
+        return not self.name.startswith(("back", "turn", "align"))
 
 
-def cross_legs(extent: float, kinematics: str = "holonomic") -> list[Leg]:
+def cross_legs(extent: float, kinematics: str = "holonomic",
+               camera: tuple[float, float] = (0.0, 0.0)) -> list[Leg]:
     """The cross (§4.3): out and back along +x, −x, +y, −y of the reference pose. A
     holonomic base keeps its heading and moves sideways for ±y; a differential base turns
     a quarter left in place, drives the same arms along its new heading, and turns back,
     so the landmarks are seen from the same five points (the turns add no parallax: the
-    bearings shift by the turn, which odometry predicts)."""
+    bearings shift by the turn, which odometry predicts).
+
+    ``camera``: where the camera sits on the robot (x, y; kernel/mount.py). The five
+    points are the camera's: a turn in place swings a camera off the centre round it, so
+    a differential base first drives ahead by x + y (its camera then turns onto the
+    reference's x), drives the side arms to ±extent of the reference's y, and turns back
+    and returns."""
     legs = []
     for name, dx, dy in (("+x", extent, 0.0), ("-x", -extent, 0.0)):
         legs += [Leg(name, dx, dy), Leg(f"back from {name}", -dx, -dy)]
     if kinematics == "differential":
+        a, b = camera
+        ahead = a + b  # the robot's x at which its turned camera sits on the reference's x
+        if ahead:
+            legs.append(Leg("align for the turn", ahead, 0.0))
         legs.append(Leg("turn to +y", 0.0, 0.0, math.pi / 2))
-        for name, dx in (("+y", extent), ("-y", -extent)):
+        for name, dx in (("+y", b + extent - a), ("-y", b - extent - a)):
             legs += [Leg(name, dx, 0.0), Leg(f"back from {name}", -dx, 0.0)]
         legs.append(Leg("turn back", 0.0, 0.0, -math.pi / 2))
+        if ahead:
+            legs.append(Leg("back to the reference", -ahead, 0.0))
     else:
         for name, dy in (("+y", extent), ("-y", -extent)):
             legs += [Leg(name, 0.0, dy), Leg(f"back from {name}", 0.0, -dy)]
@@ -141,7 +154,7 @@ class TurnBackAndLook:
         self.recognition_margin_sum = np.zeros(n)
         self.recognition_margin_frames = 0
         self.frames = 0
-        self.legs = cross_legs(settings.extent_m, kinematics)
+        self.legs = cross_legs(settings.extent_m, kinematics, (self.mount.x, self.mount.y))
         self.leg = 0
         # Grey views half-way out along each arm of the cross: the place seen a little off
         # its reference (disambiguating features must survive that, design §5; from the

@@ -213,7 +213,8 @@ class Run:
 
     def drive_cross(self, extent: float, speed: float) -> Iterator[Belief]:
         """The Turn Back and Look cross (§4.3) from here, heading kept."""
-        for leg in cross_legs(extent, self.base.info.kinematics):
+        mount = self.cfg.mount.robot_camera
+        for leg in cross_legs(extent, self.base.info.kinematics, (mount.x, mount.y)):
             yield from self.drive(leg.dx, leg.dy, leg.dyaw, speed)
 
     def learn(self, label: str = "") -> Place:
