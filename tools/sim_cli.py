@@ -20,6 +20,8 @@ SUBCOMMANDS = {
     "detect-mirror": ("tools.simcmd.detect_mirror", "find the mirror donut in a raw image"),
     "calibrate": ("tools.simcmd.calibrate", "a camera model's configuration from its "
                   "images (--model mirror|fisheye|dual-fisheye|equirectangular|ocamcalib)"),
+    "verticals": ("tools.simcmd.verticals", "how vertical the world's vertical edges stand "
+                  "in the panorama the configured camera model unwarps"),
     "record": ("tools.simcmd.record", "record a scenario to an MCAP file"),
     "ros2-robot": ("tools.simcmd.ros2_robot", "the simulated robot as a ROS 2 robot over "
                    "rmw_zenoh (images, /odom, /cmd_vel)"),
