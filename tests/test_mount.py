@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from daemon.localisation.belief import Belief
-from daemon.mapping.tbl import cross_legs
+from daemon.mapping.tbl import cross_legs, cross_tips, past_half_way
 from kernel.mount import Mount
 from kernel.se2 import SE2
 from kernel.types import Odometry
@@ -91,6 +91,39 @@ def test_a_differential_base_takes_its_camera_to_the_five_points_of_the_cross(
     assert camera_at_reference.between(robot.compose(mount)).as_tuple() == pytest.approx(
         (0.0, 0.0, 0.0))
     assert all(leg.dy == 0.0 for leg in cross_legs(0.5, "differential", camera))
+
+
+def test_each_arms_view_is_taken_in_its_outer_half_whatever_the_mount() -> None:
+    """The learning views (design §5) are taken half-way out along each arm. A camera
+    0.3 m ahead on a differential base starts the −y arm 0.3 m on the +y side of the
+    reference: "half the extent from the reference" would take the −y view there, before
+    the camera has moved; "within half the extent of the arm's end" takes it on the arm."""
+    extent, camera = 0.5, (0.3, 0.0, 0.4)
+    mount = SE2(*camera)
+    robot = SE2(2.0, 1.0, -0.3)
+    reference = robot.compose(mount)  # the EKF's frame: the camera's at the reference
+    tips = cross_tips(extent, mount.yaw)
+    taken, naive = [], []
+    for leg in cross_legs(extent, "differential", camera[:2]):
+        arm = len(taken)
+        start = robot
+        for k in range(1, 101):  # the leg driven in 100 steps
+            f = k / 100
+            robot = start.compose(SE2(f * leg.dx, f * leg.dy, f * leg.dyaw))
+            pose = reference.between(robot.compose(mount)).as_tuple()
+            if leg.out and len(taken) == arm and past_half_way(pose, tips[arm], extent):
+                taken.append(pose[:2])
+            if leg.out and len(naive) == arm and math.hypot(*pose[:2]) >= extent / 2:
+                naive.append(pose[:2])
+    assert len(taken) == 4
+    along = [(x * tx + y * ty) / extent  # metres out along the arm
+             for (x, y), (tx, ty) in zip(taken, tips, strict=True)]
+    assert all(extent / 2 - 0.01 <= a <= extent for a in along)  # the outer half
+    assert along[0] == pytest.approx(extent / 2, abs=0.01)  # ±x start at the reference
+    assert along[1] == pytest.approx(extent / 2, abs=0.01)
+    assert along[3] == pytest.approx(extent / 2, abs=0.01)  # −y starts 0.3 m on +y's side
+    tx, ty = tips[3]
+    assert (naive[3][0] * tx + naive[3][1] * ty) / extent < -0.2  # on the +y side
 
 
 def _tbl_local(*flags: str, capsys: pytest.CaptureFixture[str]) -> float:

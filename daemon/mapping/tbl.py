@@ -110,6 +110,24 @@ def cross_legs(extent: float, kinematics: str = "holonomic",
     return legs
 
 
+def cross_tips(extent: float, mount_yaw: float = 0.0) -> list[tuple[float, float]]:
+    """The ends of the cross's arms (+x, −x, +y, −y of the robot at the reference, in the
+    order :func:`cross_legs` drives them), in the frame of the camera at the reference
+    (the EKF's; turned by the mount's yaw)."""
+    c, s = math.cos(mount_yaw), math.sin(mount_yaw)
+    return [(c * dx + s * dy, -s * dx + c * dy)
+            for dx, dy in ((extent, 0.0), (-extent, 0.0), (0.0, extent), (0.0, -extent))]
+
+
+def past_half_way(pose: tuple[float, float, float], tip: tuple[float, float],
+                  extent: float) -> bool:
+    """Whether the camera is in the outer half of the arm ending at ``tip``: within half
+    the extent of its end. (Not "half the extent from the reference": a differential
+    base's camera off the centre starts a side arm away from the reference, on the
+    other arm's side when it is 0.25 m or more ahead.)"""
+    return math.dist(pose[:2], tip) <= extent / 2
+
+
 # Candidates from the two reference panoramas (with wrap margin ``margin``).
 CandidateChooser = Callable[[np.ndarray, np.ndarray, int], LandmarkSet]
 
@@ -155,6 +173,7 @@ class TurnBackAndLook:
         self.recognition_margin_frames = 0
         self.frames = 0
         self.legs = cross_legs(settings.extent_m, kinematics, (self.mount.x, self.mount.y))
+        self.tips = cross_tips(settings.extent_m, self.mount.yaw)
         self.leg = 0
         # Grey views half-way out along each arm of the cross: the place seen a little off
         # its reference (disambiguating features must survive that, design §5; from the
@@ -211,7 +230,7 @@ class TurnBackAndLook:
         out = not self.done and self.legs[self.leg].out
         arm = sum(leg.out for leg in self.legs[:self.leg])  # this out leg's arm
         if out and self._commanded and len(self.views) == arm and \
-                math.hypot(pose[0], pose[1]) >= self.settings.extent_m / 2:
+                past_half_way(pose, self.tips[arm], self.settings.extent_m):
             self.views.append(grey)  # half-way out along this arm
         if move_done and self._commanded:
             self._check_leg(odometry)
