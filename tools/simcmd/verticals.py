@@ -6,7 +6,7 @@ The method needs one property of its camera: a panorama column is a bearing. The
 vertical edge in the world — a door frame, a wall's corner, a calibration board held
 upright — lies in a plane through the camera's vertical axis and is a column of the
 panorama. A wrong model bends it: a centre a few pixels off slants the edges by a
-sinusoid of their bearing (the mirror's by ~0.5° a pixel), a wrong radial polynomial
+sinusoid of their bearing (the mirror's by up to ~0.5° a pixel), a wrong radial polynomial
 curves them. So the check unwarps each image through the configured model, finds the
 long, nearly vertical edges in the panorama (Canny and a probabilistic Hough transform),
 refits each on the sub-pixel peak of the horizontal gradient row by row, and reports
