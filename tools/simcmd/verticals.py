@@ -31,6 +31,7 @@ import numpy as np
 
 from daemon import config as config_mod
 from daemon.config import PlacecellConfig
+from daemon.vision.ncc import subpixel_peak
 from daemon.vision.unwarp import Unwarper
 from kernel.errors import PlacecellError
 from kernel.panorama import core_of, to_grey
@@ -70,15 +71,11 @@ def vertical_edge_slants(grey: np.ndarray, min_length_px: int) -> list[EdgeSlant
             c = int(round(x1 + (x2 - x1) * (y - y1) / max(y2 - y1, 1)))
             if c < 2 or c > width - 3:
                 continue
-            window = gx[y, c - 2:c + 3]
-            k = int(np.argmax(window))
-            if k in (0, 4):
+            _, peak, _ = subpixel_peak(gx[None, y, c - 2:c + 3])
+            if peak in (0.0, 4.0):
                 continue  # the peak is not inside the window: another edge
-            left, mid, right = (float(v) for v in window[k - 1:k + 2])
-            curvature = left - 2.0 * mid + right
-            offset = 0.5 * (left - right) / curvature if curvature < 0 else 0.0
             rows.append(y)
-            cols.append(c - 2 + k + offset)
+            cols.append(c - 2 + peak)
         if len(rows) < MIN_FITTED_FRACTION * min_length_px:
             continue
         b, a = np.polyfit(rows, cols, 1)
