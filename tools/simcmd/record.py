@@ -9,13 +9,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import logging
-from pathlib import Path
 
 from daemon import config as config_mod
 from hal.recording import Recorder
 from hal.registry import HalContext, create_base, create_camera
 from hal.sim.factory import shared_sim_robot
 from hal.sim.scenario import load_scenario
+from tools.simcmd import load_config
 
 log = logging.getLogger(__name__)
 
@@ -32,9 +32,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    path = args.config or ("config/placecell.toml" if Path("config/placecell.toml").is_file()
-                           else None)
-    config = config_mod.load(path)
+    config = load_config(args.config)
     sim = dataclasses.replace(config.sim, scenario=str(args.scenario), realtime=False,
                               seed=config.sim.seed if args.seed is None else args.seed)
     config = dataclasses.replace(config, sim=sim,

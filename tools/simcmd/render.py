@@ -14,11 +14,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from daemon import config as config_mod
 from daemon.vision.unwarp import Unwarper
 from hal.sim.render import Renderer
 from hal.sim.world import World, load_world
 from kernel.errors import PlacecellError
+from tools.simcmd import load_config
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -57,9 +57,7 @@ def plan_view(world: World, pose: tuple[float, float, float], px_per_m: float = 
 
 
 def run(args: argparse.Namespace) -> int:
-    path = args.config or ("config/placecell.toml" if Path("config/placecell.toml").is_file()
-                           else None)
-    config = config_mod.load(path)
+    config = load_config(args.config)
     world = load_world(args.world)
     pose = world.start_pose
     if args.pose:

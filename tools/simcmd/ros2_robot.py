@@ -31,14 +31,12 @@ import logging
 import signal
 import threading
 import time
-from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 import zenoh
 
-from daemon import config as config_mod
 from daemon.service.ros2 import TF_QOS_KEYEXPR, TF_TYPE, tf_cdr
 from hal import ros2_wire as wire
 from hal.base.ros2 import ODOMETRY, TWIST, odometry_message
@@ -46,6 +44,7 @@ from hal.sim.factory import build_sim_robot
 from hal.sim.robot import SimRobot
 from kernel.errors import CommandRejectedError
 from kernel.se2 import SE2
+from tools.simcmd import load_config
 
 log = logging.getLogger(__name__)
 
@@ -202,9 +201,7 @@ class Ros2SimRobot:
 
 
 def run(args: argparse.Namespace) -> int:
-    path = args.config or ("config/placecell.toml" if Path("config/placecell.toml").is_file()
-                           else None)
-    config = config_mod.load(path)
+    config = load_config(args.config)
     base = dataclasses.replace(config.base.sim, kinematics="holonomic" if args.holonomic
                                else "differential")
     sim = dataclasses.replace(config.sim, realtime=True, scenario=args.scenario,

@@ -24,17 +24,16 @@ import argparse
 import json
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import cv2
 import numpy as np
 
-from daemon import config as config_mod
 from daemon.config import PlacecellConfig
 from daemon.vision.ncc import subpixel_peak
 from daemon.vision.unwarp import Unwarper
 from kernel.errors import PlacecellError
 from kernel.panorama import core_of, to_grey
+from tools.simcmd import load_config
 
 MAX_TILT_DEG = 30.0  # segments further from vertical are not vertical edges
 MIN_LENGTH_OF_HEIGHT = 0.25  # an edge spans at least this fraction of the panorama's rows
@@ -109,9 +108,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    path = args.config or ("config/placecell.toml" if Path("config/placecell.toml").is_file()
-                           else None)
-    config = config_mod.load(path)
+    config = load_config(args.config)
     unwarper = Unwarper(config.projection, config.panorama)
     per_image: dict[str, list[EdgeSlant]] = {}
     for name in args.images:
